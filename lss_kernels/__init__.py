@@ -1,0 +1,17 @@
+"""lss_kernels: two-layer level-set stereo with exact occlusion geometry (Wang & Zickler).
+
+Public API: :func:`solve`, :class:`Solver`, :class:`Params`, :class:`Result`.
+Importing the package does not initialise Taichi; :func:`lss_kernels.backend.init` does.
+"""
+from .params import Params
+
+__all__ = ["Params", "Result", "Solver", "solve", "__version__"]
+__version__ = "0.1.0"
+
+
+def __getattr__(name):
+    # The solver pulls in Taichi kernels; import it only when asked for.
+    if name in ("Result", "Solver", "solve"):
+        from . import solver
+        return getattr(solver, name)
+    raise AttributeError(name)

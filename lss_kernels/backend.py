@@ -1,0 +1,73 @@
+"""The one place that initialises Taichi.
+
+The library never calls ``ti.init`` on import: entry points (the CLI, demos, benchmarks, the
+pytest fixture) call :func:`init` once.  Kernels compiled by the solver are cached on disk by
+Taichi's offline cache so that a second run of the CLI skips most of the compile time.
+"""
+from __future__ import annotations
+
+import os
+
+import taichi as ti
+
+ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu", "auto")
+
+_state = {"arch": None, "threads": None}
+
+
+def _resolve(arch: str):
+    if arch == "auto":
+        return ti.gpu if _gpu_available() else ti.cpu
+    return getattr(ti, arch)
+
+
+def _gpu_available() -> bool:
+    # Taichi falls back to the CPU on its own when asked for ti.gpu without one; we only use
+    # this to decide, so a missing GPU is never an error for arch="auto".
+    return os.environ.get("CUDA_VISIBLE_DEVICES", "0") != ""
+
+
+def init(arch: str | None = None, threads: int | None = None, offline_cache: bool = True,
+         debug: bool = False) -> str:
+    """Initialise Taichi once per process and return the arch name in use.
+
+    Parameters
+    ----------
+    arch : {"cpu", "cuda", "vulkan", "metal", "opengl", "gpu", "auto"} or None
+        Backend.  ``None`` keeps the current one if Taichi is initialised, else ``"cpu"``.
+    threads : int or None
+        CPU threads for the CPU backend (``None``: Taichi's default, all cores).
+    offline_cache : bool
+        Keep compiled kernels on disk between runs.
+
+    Calling again with the same settings is a no-op; different settings re-initialise Taichi
+    (every field allocated before becomes invalid, so do this before building a solver).
+    """
+    if arch is None:
+        arch = _state["arch"] or "cpu"
+    if arch not in ARCHES:
+        raise ValueError(f"arch: expected one of {', '.join(ARCHES)}, got {arch!r}")
+    if threads is not None and (not isinstance(threads, int) or threads < 1):
+        raise ValueError(f"threads: expected a positive integer, got {threads!r}")
+    if _state["arch"] == arch and _state["threads"] == threads:
+        return arch
+    kwargs = dict(arch=_resolve(arch), offline_cache=offline_cache, debug=debug,
+                  default_fp=ti.f32, log_level=ti.WARN, random_seed=0)
+    if threads is not None:
+        kwargs["cpu_max_num_threads"] = threads
+    if arch in ("cuda", "vulkan", "metal", "opengl"):
+        kwargs["enable_fallback"] = False
+    ti.init(**kwargs)
+    _state["arch"], _state["threads"] = arch, threads
+    return arch
+
+
+def ensure_init() -> str:
+    """Initialise with the defaults if nobody has yet (used by the high-level API)."""
+    if _state["arch"] is None:
+        return init()
+    return _state["arch"]
+
+
+def current_arch() -> str | None:
+    return _state["arch"]

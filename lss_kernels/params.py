@@ -1,0 +1,140 @@
+"""Parameters of the method, with the paper's defaults, validated once at the boundary.
+
+Section 4 of the paper: dt = 0.2, alpha = (0.2, 0.8, 0.1), mu = 4.0, beta = 0.4 / d_max, phi
+re-initialised to a signed distance every 10 iterations and 7x7-median-filtered after every
+step.  The remaining values are the choices of the authors' public release (patch sizes, filter
+widths, thresholds); ``mono_threshold`` is one value for every scene where the release tuned it
+per scene.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Params:
+    """Every tunable of the solver.
+
+    Attributes
+    ----------
+    dt : float
+        Time step of the level-set descent (Eq. 2).
+    alpha_occ, alpha_mono, alpha_const : float
+        alpha_1..alpha_3 of the boundary weight B = a1 B_occ + a2 B_mono + a3 (Eq. 1).
+    mu : float
+        Weight of the boundary-length term (Eq. 1, Eq. 2).
+    beta : float
+        Weight of |d - D| in the patch cost C_p (Eq. 5), as a multiple of 1 / c_max
+        (the paper's beta = 0.4 / d_max with costs that are patch means in [0, 1]).
+    patch_sizes : tuple of int
+        Side of the square patches at each level of the hierarchy (the release: 3, 9, 18).
+        Each size must be a multiple of the one below it (a patch is the union of
+        non-overlapping children).
+    reinit_every : int
+        Re-initialise phi to a signed distance every this many iterations.
+    median_size : int
+        Side of the median filter applied to phi after every step (odd).
+    max_iterations : int
+        Iteration cap (the paper runs 1500).
+    min_iterations : int
+        The stopping rule is not consulted before this many iterations.
+    stop_window : int
+        The stopping rule looks at the foreground changes over this many iterations.
+    stop_fraction : float
+        Stop when the fraction of pixels whose foreground label flipped during the last
+        ``stop_window`` iterations, relative to the foreground area, is below this.
+        0 disables the rule (run to ``max_iterations``).
+    phi_scale : float
+        phi is a signed distance (in pixels) times this factor (the release: 0.01).
+    curvature_sigma : float
+        Sigma of the Gaussian-derivative filters for curvature and normal (pixels).
+    curvature_clip : float
+        |kappa| is clipped to this.
+    boundary_clip : float
+        B kappa + N . grad B is clipped to [-boundary_clip, boundary_clip].
+    occ_sigma : float
+        Sigma of the epipolar Gaussian derivative behind B_occ (pixels).
+    occ_threshold : float
+        Threshold on |dM/dx| that marks likely occlusion boundaries for B_occ.
+    mono_threshold : float
+        Threshold on the Sobel magnitude that marks image edges for B_mono (one value for
+        every scene).
+    shape_weight_power : int
+        Rows of the least-squares fit of Theta are weighted by (1 / sigma^2) ** power:
+        1 is Eq. 9 of the paper, 2 is what the release does.
+    """
+
+    dt: float = 0.2
+    alpha_occ: float = 0.2
+    alpha_mono: float = 0.8
+    alpha_const: float = 0.1
+    mu: float = 4.0
+    beta: float = 0.4
+    patch_sizes: tuple = (3, 9, 18)
+    reinit_every: int = 10
+    median_size: int = 7
+    max_iterations: int = 1500
+    min_iterations: int = 60
+    stop_window: int = 20
+    stop_fraction: float = 0.002
+    phi_scale: float = 0.01
+    curvature_sigma: float = 4.0
+    curvature_clip: float = 10.0
+    boundary_clip: float = 1.0
+    occ_sigma: float = 3.0
+    occ_threshold: float = 0.02
+    mono_threshold: float = 0.08
+    shape_weight_power: int = 2
+
+    def __post_init__(self):
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the first parameter that is out of range."""
+        def need(name, ok, expected):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not ok(value):
+                raise ValueError(f"params.{name}: expected {expected}, got {value!r}")
+
+        finite = lambda v: isinstance(v, (int, float)) and math.isfinite(v)
+        pos = lambda v: finite(v) and v > 0
+        nonneg = lambda v: finite(v) and v >= 0
+        posint = lambda v: isinstance(v, int) and v >= 1
+        need("dt", lambda v: pos(v) and v <= 10, "a number in (0, 10]")
+        for name in ("alpha_occ", "alpha_mono", "alpha_const"):
+            need(name, nonneg, "a finite number >= 0")
+        need("mu", nonneg, "a finite number >= 0")
+        need("beta", nonneg, "a finite number >= 0")
+        need("patch_sizes", lambda v: isinstance(v, tuple) and len(v) >= 1
+             and all(isinstance(s, int) and not isinstance(s, bool) and s >= 2 for s in v)
+             and all(b % a == 0 and b > a for a, b in zip(v, v[1:])),
+             "a tuple of increasing integers >= 2, each a multiple of the one before")
+        need("reinit_every", posint, "an integer >= 1")
+        need("median_size", lambda v: isinstance(v, int) and v in (1, 3, 5, 7),
+             "1, 3, 5 or 7")
+        need("max_iterations", posint, "an integer >= 1")
+        need("min_iterations", lambda v: isinstance(v, int) and v >= 0, "an integer >= 0")
+        need("stop_window", posint, "an integer >= 1")
+        need("stop_fraction", lambda v: nonneg(v) and v < 1, "a number in [0, 1)")
+        need("phi_scale", pos, "a finite number > 0")
+        need("curvature_sigma", lambda v: pos(v) and v <= 16, "a number in (0, 16]")
+        need("curvature_clip", pos, "a finite number > 0")
+        need("boundary_clip", pos, "a finite number > 0")
+        need("occ_sigma", lambda v: pos(v) and v <= 16, "a number in (0, 16]")
+        need("occ_threshold", pos, "a finite number > 0")
+        need("mono_threshold", pos, "a finite number > 0")
+        need("shape_weight_power", lambda v: v in (1, 2), "1 (the paper) or 2 (the release)")
+
+    def replace(self, **changes) -> "Params":
+        """A copy with some fields changed (validated)."""
+        unknown = set(changes) - {f.name for f in dataclasses.fields(self)}
+        if unknown:
+            raise ValueError(f"params: unknown parameter(s) {sorted(unknown)}")
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["patch_sizes"] = list(self.patch_sizes)
+        return d
