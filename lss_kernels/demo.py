@@ -1,0 +1,364 @@
+"""``lss demo``: watch the solver work, in the layout of the paper's Fig. 1.
+
+The demo steps a :class:`~lss_kernels.Solver` and every ``every`` iterations records
+
+* a frame laid out like Fig. 1(b): the left image with the current (red) and initial (yellow)
+  boundary, the consensus mean d-bar and its confidence 1/sigma (Eq. 7, cyclopean frame), the
+  two-surface disparity D (Eq. 4) with occlusions in dark blue, and, when ground truth exists,
+  the true disparity with the current boundary; the caption gives the iteration and, with
+  ground truth, the running occlusion F1 and bad-4.0;
+* the disparity message of one patch, drawn as in Fig. 1(a) (Eq. 6).
+
+Outputs under ``out``: ``frames/frame_0000.png ...``, ``evolution.gif`` (loops forever; one frame
+per recorded iteration, iteration 0 first and the final state last), ``patch.png`` (Fig. 1(a)),
+and the final ``disparity.png`` and ``overlay.png`` (left view, the input's size).
+
+Command line (registered by :func:`add_cli`)::
+
+    lss demo [--scene DIR | LEFT RIGHT --dmax N --init ellipse:CX,CY,RX,RY|MASK.png]
+             [--preset NAME] [--out DIR] [--every K] [--arch ARCH] [--patch X,Y,LEVEL]
+             [--iterations N] [--quiet]
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import numpy as np
+
+from . import viz
+
+__all__ = ["run_demo", "add_cli", "main_demo", "parse_init", "parse_patch", "default_patch",
+           "read_image", "recorded_iterations"]
+
+DEFAULT_PRESET = "easy"
+
+
+# ---------------------------------------------------------------------------------------------
+# Parsing
+# ---------------------------------------------------------------------------------------------
+
+def read_image(path) -> np.ndarray:
+    """Read an image file as float32 ``(H, W, 3)`` in [0, 1] (grey is repeated, alpha dropped)."""
+    import imageio.v3 as iio
+    a = np.asarray(iio.imread(path))
+    if a.ndim == 2:
+        a = np.repeat(a[..., None], 3, axis=2)
+    if a.ndim != 3 or a.shape[2] < 3:
+        raise ValueError(f"{path}: expected an RGB or grey image, got shape {a.shape}")
+    a = a[..., :3]
+    if np.issubdtype(a.dtype, np.integer):
+        return (a.astype(np.float32) / float(np.iinfo(a.dtype).max)).astype(np.float32)
+    return np.clip(a.astype(np.float32), 0.0, 1.0)
+
+
+def parse_init(text: str, shape=None):
+    """Parse ``--init``: ``ellipse:CX,CY,RX,RY`` (left-view pixels) or a mask image path.
+
+    Returns a tuple ``(cx, cy, rx, ry)`` of floats or an ``(H, W)`` bool mask (non-zero
+    pixels are foreground).  Raises ``ValueError`` with a one-line message.
+    """
+    if text is None:
+        raise ValueError("--init: required with LEFT RIGHT (ellipse:CX,CY,RX,RY or a mask PNG)")
+    if text.startswith("ellipse:"):
+        parts = text[len("ellipse:"):].split(",")
+        try:
+            values = tuple(float(p) for p in parts)
+        except ValueError:
+            values = ()
+        if len(values) != 4 or not all(np.isfinite(values)):
+            raise ValueError(f"--init: expected ellipse:CX,CY,RX,RY with four numbers, got {text!r}")
+        if values[2] <= 0 or values[3] <= 0:
+            raise ValueError(f"--init: the radii RX, RY must be > 0, got {text!r}")
+        return values
+    if not os.path.isfile(text):
+        raise ValueError(f"--init: expected ellipse:CX,CY,RX,RY or an existing mask image, "
+                         f"got {text!r}")
+    import imageio.v3 as iio
+    try:
+        m = np.asarray(iio.imread(text))
+    except Exception as exc:  # noqa: BLE001 - any decoder failure is a bad argument
+        raise ValueError(f"--init: cannot read mask image {text!r}: {exc}") from None
+    if m.ndim == 3:
+        m = m[..., :3].max(axis=2) if m.shape[2] >= 3 else m[..., 0]
+    mask = m > (np.iinfo(m.dtype).max // 2 if np.issubdtype(m.dtype, np.integer) else 0.5)
+    if shape is not None and mask.shape != tuple(shape):
+        raise ValueError(f"--init: mask {text!r} is {mask.shape[1]}x{mask.shape[0]}, the "
+                         f"images are {shape[1]}x{shape[0]}")
+    if not mask.any():
+        raise ValueError(f"--init: mask {text!r} has no foreground pixel")
+    return mask
+
+
+def parse_patch(text: str, n_levels: int | None = None):
+    """Parse ``--patch X,Y,LEVEL`` (cyclopean pixels, level index) into ``(x, y, level)``."""
+    parts = text.split(",")
+    try:
+        x, y, level = (int(p) for p in parts)
+    except ValueError:
+        raise ValueError(f"--patch: expected X,Y,LEVEL as three integers, got {text!r}") from None
+    if x < 0 or y < 0 or level < 0 or (n_levels is not None and level >= n_levels):
+        raise ValueError(f"--patch: expected X, Y >= 0 and 0 <= LEVEL < {n_levels}, got {text!r}")
+    return x, y, level
+
+
+def recorded_iterations(n_iterations: int, every: int) -> list:
+    """The iterations at which :func:`run_demo` records a frame when the solver runs
+    ``n_iterations`` steps: 0, every, 2 every, ... and the last one."""
+    its = list(range(0, n_iterations + 1, every))
+    if its[-1] != n_iterations:
+        its.append(n_iterations)
+    return its
+
+
+def default_patch(phi0: np.ndarray, n_levels: int):
+    """The default patch of :func:`run_demo`: middle level, on the row through the centre of
+    the initial foreground (``phi > 0``, cyclopean frame), at its left boundary."""
+    fg = np.asarray(phi0) > 0
+    level = n_levels // 2
+    if not fg.any():
+        h, w = fg.shape
+        return w // 2, h // 2, level
+    rows, _ = np.nonzero(fg)
+    y = int(round(rows.mean()))
+    cols = np.nonzero(fg[y])[0]
+    if cols.size == 0:
+        y = int(rows[np.argmin(np.abs(rows - y))])
+        cols = np.nonzero(fg[y])[0]
+    return int(cols.min()), y, level
+
+
+# ---------------------------------------------------------------------------------------------
+# The demo
+# ---------------------------------------------------------------------------------------------
+
+def _scores(snapshot, scene):
+    if scene is None or getattr(scene, "disp_left", None) is None:
+        return None
+    from . import metrics
+    return metrics.score(snapshot["disparity"], snapshot["occlusion"], scene)
+
+
+def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch=None,
+             scene=None, init_frame="left", progress=True, params=None, arch=None) -> dict:
+    """Run the solver and record its evolution like the paper's Fig. 1.
+
+    Parameters
+    ----------
+    left, right : (H, W, 3) float32 in [0, 1]
+        Rectified pair; the left image is the reference.
+    d_max : float
+        Largest disparity (left-view pixels).
+    init : (cx, cy, rx, ry) or (H, W) bool
+        Initial foreground (ellipse or mask) in the frame ``init_frame``.
+    out : str or path-like
+        Output folder (created).
+    every : int
+        Record a frame every this many iterations (plus iteration 0 and the last one).
+    max_iterations : int or None
+        Iteration cap (``None``: ``params.max_iterations``).
+    patch : (x, y, level) or None
+        Patch of Fig. 1(a) (cyclopean pixels, level index into ``params.patch_sizes``);
+        ``None``: :func:`default_patch`.
+    scene : Scene or None
+        Ground truth (``disp_left``, ...) for the last panel and the running scores.
+    init_frame : {"left", "cyclopean"}
+    progress : bool
+        Print one line per recorded iteration and a summary.
+    params : Params or None
+    arch : str or None
+        Passed to the solver (Taichi must already be initialised; see :mod:`lss_kernels.backend`).
+
+    Returns
+    -------
+    dict
+        ``frames`` (list of PNG paths), ``gif``, ``patch``, ``disparity``, ``overlay``.
+    """
+    import imageio.v3 as iio
+
+    from . import Params, Solver
+
+    every = int(every)
+    if every < 1:
+        raise ValueError(f"every: expected an integer >= 1, got {every!r}")
+    params = params if params is not None else Params()
+    if max_iterations is not None:
+        params = params.replace(max_iterations=int(max_iterations))
+    out = os.fspath(out)
+    frames_dir = os.path.join(out, "frames")
+    os.makedirs(frames_dir, exist_ok=True)
+    for name in os.listdir(frames_dir):        # frames of an earlier run would be mixed in
+        if name.startswith("frame_") and name.endswith(".png"):
+            os.remove(os.path.join(frames_dir, name))
+
+    left = np.asarray(left, np.float32)
+    t0 = time.perf_counter()
+    solver = Solver(left, right, d_max, init, params=params, arch=arch, init_frame=init_frame)
+    n_levels = len(solver.params.patch_sizes)
+    snap = solver.snapshot()
+    if patch is None:
+        patch = default_patch(snap["phi"], n_levels)
+    px, py, plevel = (int(v) for v in patch)
+    h, w = snap["phi"].shape
+    if not (0 <= px < w and 0 <= py < h and 0 <= plevel < n_levels):
+        raise ValueError(f"patch: ({px}, {py}, {plevel}) is outside the {w}x{h} grid or the "
+                         f"{n_levels} levels")
+    true_disp = None if scene is None else getattr(scene, "disp_left", None)
+
+    frames, frame_paths, curves = [], [], []
+    last_info = {}
+
+    def record(snapshot):
+        it = solver.iteration
+        scores = _scores(snapshot, scene)
+        frame = viz.evolution_frame(left, snapshot, d_max, it, true_disparity=true_disp,
+                                    scores=scores)
+        path = os.path.join(frames_dir, f"frame_{len(frame_paths):04d}.png")
+        viz.save_rgb_png(path, frame)
+        frames.append(frame)
+        frame_paths.append(path)
+        curves.append((it, solver.patch_curve(plevel, px, py)))
+        if progress:
+            line = f"iter {it:5d}"
+            if last_info:
+                line += (f"  flipped {last_info['flipped']:6d}  fg {last_info['fg_fraction']:.3f}"
+                         f"  moving {last_info['moving_fraction']:.4f}"
+                         f"  step {1e3 * last_info['seconds']:7.1f} ms")
+            if scores:
+                line += f"  occ F1 {float(scores['occ_f1']):.3f}  bad-4.0 {float(scores['bad4']):.3g}"
+            print(line, flush=True)
+
+    record(snap)
+    recorded = {0}
+    while not solver.done and solver.iteration < params.max_iterations:
+        last_info = solver.step()
+        if solver.iteration % every == 0:
+            record(solver.snapshot())
+            recorded.add(solver.iteration)
+    if solver.iteration not in recorded:
+        record(solver.snapshot())
+
+    gif_path = os.path.join(out, "evolution.gif")
+    durations = [250] * (len(frames) - 1) + [1500]
+    iio.imwrite(gif_path, np.stack(frames), extension=".gif", duration=durations, loop=0)
+
+    result = solver.result()
+    patch_size = solver.params.patch_sizes[plevel]
+    last_curve = curves[-1][1]
+    shift = float(last_curve.get("mean_D", 0.0)) / 2.0 if np.isfinite(
+        last_curve.get("mean_D", np.nan)) else 0.0
+    box = (px + shift - patch_size // 2, py - patch_size // 2, patch_size)
+    fig = viz.patch_message_figure(
+        curves, left=left, patch_box=box,
+        title=(f"disparity message of the {patch_size}x{patch_size} patch at cyclopean "
+               f"({px}, {py}), level {plevel} (Fig. 1a)"))
+    patch_path = viz.save_figure(fig, os.path.join(out, "patch.png"))
+    disp_path = viz.save_disparity_png(os.path.join(out, "disparity.png"), result.disparity,
+                                       0, d_max, title="D (left view)",
+                                       occlusion=result.occlusion)
+    init_fg = snap.get("initial_foreground")
+    overlay_path = viz.save_overlay_png(os.path.join(out, "overlay.png"), left,
+                                        result.foreground, result.occlusion, init_fg)
+    if progress:
+        print(f"{solver.iteration} iterations ({solver.stop_reason or 'cap'}) in "
+              f"{time.perf_counter() - t0:.1f} s; wrote {len(frame_paths)} frames, "
+              f"{gif_path}, {patch_path}, {disp_path}, {overlay_path}", flush=True)
+    return dict(frames=frame_paths, gif=gif_path, patch=patch_path, disparity=disp_path,
+                overlay=overlay_path)
+
+
+# ---------------------------------------------------------------------------------------------
+# Command line
+# ---------------------------------------------------------------------------------------------
+
+def add_cli(subparsers):
+    """Register the ``demo`` sub-command on an ``argparse`` sub-parsers object."""
+    from .backend import ARCHES
+    p = subparsers.add_parser(
+        "demo", help="watch the solver evolve (frames, GIF, a patch's message; paper Fig. 1)",
+        description="Run the solver on a built-in scene, a scene folder or a stereo pair and "
+                    "record its evolution in the layout of the paper's Fig. 1.")
+    p.add_argument("images", nargs="*", metavar="LEFT RIGHT",
+                   help="left and right image files (with --dmax and --init)")
+    p.add_argument("--scene", metavar="DIR", help="a scene folder (lss_kernels.io.load_scene)")
+    p.add_argument("--preset", default=DEFAULT_PRESET, metavar="NAME",
+                   help=f"built-in scene used without data arguments (default {DEFAULT_PRESET})")
+    p.add_argument("--dmax", type=float, metavar="N", help="largest disparity (left-view px)")
+    p.add_argument("--init", metavar="SPEC",
+                   help="initial boundary: ellipse:CX,CY,RX,RY (left view) or a mask PNG")
+    p.add_argument("--out", default="lss_demo", metavar="DIR", help="output folder")
+    p.add_argument("--every", type=int, default=10, metavar="K",
+                   help="record a frame every K iterations (default 10)")
+    p.add_argument("--arch", default="auto", choices=ARCHES, help="Taichi backend")
+    p.add_argument("--patch", metavar="X,Y,LEVEL",
+                   help="patch of the Fig. 1(a) plot (cyclopean pixels, level index)")
+    p.add_argument("--iterations", type=int, metavar="N", help="iteration cap")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.set_defaults(func=main_demo)
+    return p
+
+
+def _fail(message: str) -> int:
+    print(f"lss demo: error: {message}", file=sys.stderr)
+    return 2
+
+
+def main_demo(args) -> int:
+    """Entry point of ``lss demo`` (``args`` from the parser of :func:`add_cli`)."""
+    images = list(getattr(args, "images", []) or [])
+    scene, init_frame = None, "left"
+    try:
+        if args.every is not None and args.every < 1:
+            raise ValueError(f"--every: expected an integer >= 1, got {args.every}")
+        if args.iterations is not None and args.iterations < 1:
+            raise ValueError(f"--iterations: expected an integer >= 1, got {args.iterations}")
+        patch = parse_patch(args.patch) if args.patch else None
+        if images and args.scene:
+            raise ValueError("give either --scene DIR or LEFT RIGHT, not both")
+        if images:
+            if len(images) != 2:
+                raise ValueError(f"expected two images LEFT RIGHT, got {len(images)} argument(s)")
+            if args.dmax is None or not np.isfinite(args.dmax) or args.dmax <= 0:
+                raise ValueError("--dmax: a positive number is required with LEFT RIGHT")
+            for path in images:
+                if not os.path.isfile(path):
+                    raise ValueError(f"no such image file: {path!r}")
+            left, right = read_image(images[0]), read_image(images[1])
+            if left.shape != right.shape:
+                raise ValueError(f"the images differ in size: {left.shape[1]}x{left.shape[0]} "
+                                 f"and {right.shape[1]}x{right.shape[0]}")
+            init = parse_init(args.init, left.shape[:2])
+            d_max = float(args.dmax)
+        else:
+            if args.scene:
+                from . import io
+                if not os.path.isdir(args.scene):
+                    raise ValueError(f"--scene: no such folder {args.scene!r}")
+                scene = io.load_scene(args.scene)
+            else:
+                from . import scenes
+                scene = scenes.make_scene(args.preset)
+            left, right = scene.left, scene.right
+            d_max = float(args.dmax) if args.dmax is not None else float(scene.d_max)
+            if args.init is not None:
+                init = parse_init(args.init, left.shape[:2])
+            elif getattr(scene, "init_ellipse_cyclopean", None) is not None:
+                init, init_frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
+            else:
+                init = tuple(scene.init_ellipse)
+    except (ValueError, KeyError, FileNotFoundError) as exc:
+        return _fail(str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc))
+
+    from . import backend
+    arch = backend.init(arch=args.arch)
+    if not args.quiet:
+        print(f"lss demo: {left.shape[1]}x{left.shape[0]}, d_max {d_max:g}, arch {arch}, "
+              f"output {args.out}", flush=True)
+    try:
+        run_demo(left, right, d_max, init, args.out, every=args.every,
+                 max_iterations=args.iterations, patch=patch, scene=scene,
+                 init_frame=init_frame, progress=not args.quiet)
+    except ValueError as exc:
+        return _fail(str(exc).strip().splitlines()[0])
+    return 0
