@@ -52,7 +52,8 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
     if _state["arch"] == arch and _state["threads"] == threads:
         return arch
     kwargs = dict(arch=_resolve(arch), offline_cache=offline_cache, debug=debug,
-                  default_fp=ti.f32, log_level=ti.WARN, random_seed=0)
+                  default_fp=ti.f32, log_level=ti.WARN, random_seed=0,
+                  unrolling_limit=0)
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
     if arch in ("cuda", "vulkan", "metal", "opengl"):
@@ -71,3 +72,46 @@ def ensure_init() -> str:
 
 def current_arch() -> str | None:
     return _state["arch"]
+
+
+class FieldPool:
+    """Allocates fields in one SNode tree that can be freed as a whole.
+
+    Plain ``ti.field(shape=...)`` allocations live until the process ends; a solver that is
+    built once per image pair would leak them.  Classes take a pool, ask it for their fields,
+    and the owner calls :meth:`finalize` once everything is declared and :meth:`destroy` when
+    done.  Fields cannot be read or written before :meth:`finalize`.
+    """
+
+    def __init__(self):
+        self._builder = ti.FieldsBuilder()
+        self._tree = None
+        self.nbytes = 0
+
+    def _place(self, f, shape, offset, nbytes):
+        shape = tuple(int(s) for s in shape)
+        if shape:
+            axes = ti.axes(*range(len(shape)))
+            self._builder.dense(axes, shape).place(f, offset=offset)
+        else:
+            self._builder.place(f)
+        n = 1
+        for s in shape:
+            n *= s
+        self.nbytes += n * nbytes
+        return f
+
+    def field(self, dtype, shape, offset=None):
+        return self._place(ti.field(dtype), shape, offset, 4)
+
+    def vector(self, n, dtype, shape, offset=None):
+        return self._place(ti.Vector.field(n, dtype), shape, offset, 4 * n)
+
+    def finalize(self):
+        self._tree = self._builder.finalize()
+        return self
+
+    def destroy(self):
+        if self._tree is not None:
+            self._tree.destroy()
+            self._tree = None

@@ -1,0 +1,187 @@
+"""Boundary costs B_occ and B_mono (Sec. 4) and their combination B (Eq. 1).
+
+The matching cost M and its patch levels live in :mod:`lss_kernels.hierarchy` (they are the
+upward pass's first product).  Here:
+
+* ``B_occ(x, y, c)``: small where the matching cost changes abruptly along the epipolar line:
+  |x-derivative of a Gaussian (sigma = ``occ_sigma``)| of the size-3 cost volume, thresholded,
+  then the 3-D Euclidean distance to the nearest above-threshold voxel, normalised to [0, 1].
+* ``B_mono(x, y, c)``: small where both images have an intensity edge at the projections of
+  the scene point (x, y, c): with e(.) = 0.5 (1 - dist_to_edge / max dist) per image
+  (0.5 on an edge, 0 far from edges), ``B_mono = 1 - e_L(x + c) - e_R(x - c)``; edges are
+  Sobel magnitudes (grey, Sobel / 8) above ``mono_threshold``.
+* ``B = alpha_occ B_occ + alpha_mono B_mono + alpha_const``, read at Theta_1(x, y) with linear
+  interpolation between integer disparities.
+
+Frame: cyclopean; volumes ``(H, W, c_max)`` indexed ``[y, x, c - 1]``.
+"""
+import math
+
+import numpy as np
+import taichi as ti
+
+from .distance import INF, DistanceTransform
+
+__all__ = ["BoundaryCosts", "gaussian_taps"]
+
+
+def gaussian_taps(sigma, half_width=None):
+    """Sampled Gaussian ``g`` (sums to 1) and its first and second derivatives on
+    ``-half_width .. half_width`` (default ``ceil(3.5 sigma)``)."""
+    if half_width is None:
+        half_width = int(math.ceil(3.5 * sigma))
+    i = np.arange(-half_width, half_width + 1, dtype=np.float64)
+    g = np.exp(-i ** 2 / (2 * sigma ** 2))
+    g /= g.sum()
+    g1 = -i / sigma ** 2 * g
+    g2 = (i ** 2 / sigma ** 4 - 1 / sigma ** 2) * g
+    return g, g1, g2
+
+
+@ti.data_oriented
+class BoundaryCosts:
+    """Owns B_occ (a volume) and the two monocular edge maps; evaluates B at any (x, y, c)."""
+
+    def __init__(self, pool, height, width, c_max):
+        self.H, self.W, self.C = int(height), int(width), int(c_max)
+        self.b_occ = pool.field(ti.f32, (self.H, self.W, self.C))
+        self.edge_left = pool.field(ti.f32, (self.H, self.W))
+        self.edge_right = pool.field(ti.f32, (self.H, self.W))
+        self._max = pool.field(ti.f32, ())
+        self.alpha = pool.vector(3, ti.f32, ())
+
+    # -------------------------------------------------------------------- B_occ
+    @ti.kernel
+    def _smooth_y(self, src: ti.template(), dst: ti.template(), taps: ti.types.ndarray()):
+        half = (taps.shape[0] - 1) // 2
+        for y, x, k in dst:
+            s = 0.0
+            for i in range(-half, half + 1):
+                yy = ti.min(ti.max(y + i, 0), self.H - 1)
+                s += taps[i + half] * src[yy, x, k]
+            dst[y, x, k] = s
+
+    @ti.kernel
+    def _occ_features(self, src: ti.template(), taps: ti.types.ndarray(), threshold: ti.f32):
+        half = (taps.shape[0] - 1) // 2
+        for y, x, k in self.b_occ:
+            s = 0.0
+            for i in range(-half, half + 1):
+                xx = ti.min(ti.max(x + i, 0), self.W - 1)
+                s += taps[i + half] * src[y, xx, k]
+            self.b_occ[y, x, k] = 0.0 if ti.abs(s) > threshold else INF
+
+    @ti.kernel
+    def _sqrt_normalise(self, vol: ti.template()):
+        self._max[None] = 0.0
+        for I in ti.grouped(vol):
+            if vol[I] < INF * 0.5:
+                ti.atomic_max(self._max[None], ti.sqrt(vol[I]))
+        m = self._max[None]
+        for I in ti.grouped(vol):
+            v = vol[I]
+            vol[I] = ti.min(ti.sqrt(v) / m, 1.0) if (m > 0 and v < INF * 0.5) else 1.0
+
+    def build_occ(self, cost_level1, sigma, threshold):
+        """B_occ from the size-3 normalised cost volume (``cost_level1`` may carry a margin;
+        only its in-image part is read)."""
+        g, _, _ = gaussian_taps(sigma, int(math.ceil(4 * sigma)))
+        # derivative taps as central differences of the sampled Gaussian (what a discrete
+        # gradient of the smoothing kernel gives)
+        dg = np.zeros_like(g)
+        dg[1:-1] = (g[2:] - g[:-2]) / 2.0
+        tmp = ti.field(ti.f32)
+        builder = ti.FieldsBuilder()
+        builder.dense(ti.ijk, (self.H, self.W, self.C)).place(tmp)
+        tree = builder.finalize()
+        self._smooth_y(cost_level1, tmp, g.astype(np.float32))
+        # correlation with dg[::-1] is convolution with dg
+        self._occ_features(tmp, dg[::-1].astype(np.float32).copy(), float(threshold))
+        tree.destroy()
+        edt = DistanceTransform((self.H, self.W, self.C))
+        edt.run(self.b_occ)
+        edt.destroy()
+        self._sqrt_normalise(self.b_occ)
+
+    # -------------------------------------------------------------------- B_mono
+    @ti.kernel
+    def _sobel_edges(self, img: ti.template(), out: ti.template(), threshold: ti.f32):
+        for y, x in out:
+            gx = 0.0
+            gy = 0.0
+            for dy, dx in ti.static(ti.ndrange((-1, 2), (-1, 2))):
+                yy = ti.min(ti.max(y + dy, 0), self.H - 1)
+                xx = ti.min(ti.max(x + dx, 0), self.W - 1)
+                p = img[yy, xx]
+                grey = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
+                wx = ti.static(dx * (2 - abs(dy)))
+                wy = ti.static(dy * (2 - abs(dx)))
+                gx += wx * grey
+                gy += wy * grey
+            mag = ti.sqrt(gx * gx + gy * gy) / 8.0
+            out[y, x] = 0.0 if mag > threshold else INF
+
+    @ti.kernel
+    def _edge_score(self, dist2: ti.template(), out: ti.template()):
+        self._max[None] = 0.0
+        for y, x, _ in dist2:
+            if dist2[y, x, 0] < INF * 0.5:
+                ti.atomic_max(self._max[None], ti.sqrt(dist2[y, x, 0]))
+        m = self._max[None]
+        for y, x, _ in dist2:
+            d2 = dist2[y, x, 0]
+            e = 0.0
+            if d2 < INF * 0.5:
+                e = 0.5 * (1.0 - ti.sqrt(d2) / m) if m > 0 else 0.5
+            out[y, x] = e
+
+    def build_mono(self, left, right, threshold):
+        """Edge scores e_L, e_R of the two images (``(H, W)`` vector fields in [0, 1])."""
+        dist2 = ti.field(ti.f32)
+        builder = ti.FieldsBuilder()
+        builder.dense(ti.ijk, (self.H, self.W, 1)).place(dist2)
+        tree = builder.finalize()
+        edt = DistanceTransform((self.H, self.W, 1))
+        for img, out in ((left, self.edge_left), (right, self.edge_right)):
+            self._sobel_edges(img, out, float(threshold))
+            self._copy_to_3d(out, dist2)
+            edt.run(dist2)
+            self._edge_score(dist2, out)
+        edt.destroy()
+        tree.destroy()
+
+    @ti.kernel
+    def _copy_to_3d(self, src: ti.template(), dst: ti.template()):
+        for y, x in src:
+            dst[y, x, 0] = src[y, x]
+
+    def build(self, cost_level1, left, right, params):
+        """Everything B needs, once per solve."""
+        self.alpha[None] = [params.alpha_occ, params.alpha_mono, params.alpha_const]
+        self.build_occ(cost_level1, params.occ_sigma, params.occ_threshold)
+        self.build_mono(left, right, params.mono_threshold)
+
+    # -------------------------------------------------------------------- evaluation
+    @ti.func
+    def b_mono_at(self, y, x, k):
+        """B_mono at integer disparity index k (c = k + 1); zero edge score off the image."""
+        c = k + 1
+        e = 0.0
+        if x + c < self.W:
+            e += self.edge_left[y, x + c]
+        if x - c >= 0:
+            e += self.edge_right[y, x - c]
+        return 1.0 - e
+
+    @ti.func
+    def b_at(self, y, x, c):
+        """B(x, y, c) for a real cyclopean disparity c (linear interpolation, clamped)."""
+        kf = ti.min(ti.max(c - 1.0, 0.0), self.C - 1.0)
+        k0 = ti.min(ti.cast(ti.floor(kf), ti.i32), self.C - 2) if self.C > 1 else 0
+        t = kf - k0
+        a = self.alpha[None]
+        v0 = a[0] * self.b_occ[y, x, k0] + a[1] * self.b_mono_at(y, x, k0)
+        v1 = v0
+        if self.C > 1:
+            v1 = a[0] * self.b_occ[y, x, k0 + 1] + a[1] * self.b_mono_at(y, x, k0 + 1)
+        return (1.0 - t) * v0 + t * v1 + a[2]

@@ -1,0 +1,317 @@
+"""The cooperative patch hierarchy: upward messages and validity, downward consensus.
+
+Sec. 3 of the paper, after Chakrabarti et al. (2015): levels of dense, overlapping square
+patches, one patch centred on every pixel at every level, where a patch at level ``l`` is the
+union of ``r x r`` non-overlapping patches of level ``l - 1`` (``r = s_l / s_{l-1}``; level 0
+is the pixels).  Everything a patch needs is relayed between parents and children:
+
+* **upward**: the patch-mean matching cost C_p(c) (once, at set-up), the patch mean of the
+  current disparity D, and the extremes of phi and phi(x + delta_theta) that decide the
+  validity w_p (Eq. 4);
+* **messages**: d_p = argmin_c C_p(c) + beta |c - <D>_p| and sigma_p (Eq. 5);
+* **downward**: every pixel receives the sums of w_p / sigma_p^2 and w_p d_p / sigma_p^2 over
+  all patches that contain it (Eq. 7), relayed from parents to children.
+
+Frame: cyclopean, arrays ``(H, W)`` indexed ``[y, x]``; disparities are cyclopean (left-view
+disparity = 2 c), searched over integer ``c = 1 .. c_max`` (volume index ``k = c - 1``).
+Patches are centred on in-image pixels only; pixels outside the image contribute nothing
+(sums are over in-image pixels and means divide by the in-image count).  Intermediate levels
+carry a margin of patch centres outside the image because a parent near the border has
+children centred there.
+"""
+import numpy as np
+import taichi as ti
+
+__all__ = ["Level", "PatchHierarchy", "level_geometry"]
+
+
+class Level:
+    """Geometry of one level: patch side ``size``, the offsets of its children's centres
+    (one axis; the children are the product of these offsets in y and x), and ``margin``, the
+    number of patch centres kept outside the image on each side."""
+
+    def __init__(self, size, half, offsets, margin):
+        self.size, self.half, self.offsets, self.margin = size, half, tuple(offsets), margin
+
+    def __repr__(self):
+        return (f"Level(size={self.size}, offsets={self.offsets}, margin={self.margin})")
+
+
+def level_geometry(sizes):
+    """Levels for the patch sides ``sizes`` (e.g. ``(3, 9, 18)``).
+
+    A patch of side ``s`` centred on ``x`` covers ``[x - s // 2, x - s // 2 + s - 1]``; its
+    children (side ``s'``) are centred on ``x + o`` with ``o = -s // 2 + j s' + s' // 2``,
+    ``j = 0 .. s / s' - 1``.
+    """
+    sizes = (1,) + tuple(sizes)
+    levels = []
+    for s_child, s in zip(sizes, sizes[1:]):
+        offs = [-(s // 2) + j * s_child + s_child // 2 for j in range(s // s_child)]
+        levels.append(Level(s, s // 2, offs, 0))
+    margin = 0
+    for lev_idx in range(len(levels) - 1, -1, -1):
+        levels[lev_idx].margin = margin
+        margin += max(abs(o) for o in levels[lev_idx].offsets)
+    return levels
+
+
+@ti.data_oriented
+class PatchHierarchy:
+    """Fields of every level and the kernels of the upward and downward passes.
+
+    Parameters
+    ----------
+    pool : lss_kernels.backend.FieldPool
+        Where the fields are allocated.
+    height, width : int
+        Image size (cyclopean grid).
+    c_max : int
+        Number of cyclopean disparities searched (``c = 1 .. c_max``).
+    sizes : tuple of int
+        Patch sides per level.
+    """
+
+    def __init__(self, pool, height, width, c_max, sizes):
+        self.H, self.W, self.C = int(height), int(width), int(c_max)
+        self.levels = level_geometry(sizes)
+        H, W, C = self.H, self.W, self.C
+
+        def padded(lev, *extra, dtype=ti.f32):
+            m = lev.margin
+            return pool.field(dtype, (H + 2 * m, W + 2 * m) + extra,
+                              offset=(-m, -m) + (0,) * len(extra))
+
+        # upward: normalised patch-mean cost volumes, in-image pixel counts, D sums, extremes
+        self.cost = [padded(lev, C) for lev in self.levels]
+        self.count = [padded(lev, dtype=ti.i32) for lev in self.levels]
+        self.d_sum = [padded(lev) for lev in self.levels]
+        self.phi_max = [padded(lev) for lev in self.levels]
+        self.phi_plus_min = [padded(lev) for lev in self.levels]
+        # messages of the in-image patches
+        self.d_p = [pool.field(ti.f32, (H, W)) for _ in self.levels]
+        self.sigma_p = [pool.field(ti.f32, (H, W)) for _ in self.levels]
+        self.valid = [pool.field(ti.i32, (H, W)) for _ in self.levels]
+        # downward relays of (w / sigma^2, w d / sigma^2)
+        self.relay = [padded(lev, 2) for lev in self.levels]
+        # the consensus (Eq. 7)
+        self.precision = pool.field(ti.f32, (H, W))       # 1 / sigma^2
+        self.consensus_mean = pool.field(ti.f32, (H, W))  # d-bar, cyclopean units
+        self._lo = pool.field(ti.f32, ())
+        self._hi = pool.field(ti.f32, ())
+        self.curve = pool.field(ti.f32, (C,))
+
+    # ------------------------------------------------------------------ set-up (upward costs)
+    @ti.kernel
+    def _cost_from_pixels(self, left: ti.template(), right: ti.template(), dst: ti.template(),
+                          count: ti.template(), offs: ti.template()):
+        H, W = self.H, self.W
+        for y, x, k in dst:
+            c = k + 1
+            total = 0.0
+            n = 0
+            for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
+                py = y + offs[jy]
+                px = x + offs[jx]
+                if 0 <= py < H and 0 <= px < W:
+                    xl = ti.min(px + c, W - 1)
+                    xr = ti.max(px - c, 0)
+                    diff = 0.0
+                    for ch in ti.static(range(3)):
+                        diff += ti.abs(left[py, xl][ch] - right[py, xr][ch])
+                    total += diff / 3.0
+                    n += 1
+            dst[y, x, k] = total / ti.max(n, 1)
+            if k == 0:
+                count[y, x] = n
+
+    @ti.kernel
+    def _cost_from_children(self, src: ti.template(), src_count: ti.template(),
+                            dst: ti.template(), count: ti.template(), offs: ti.template()):
+        for y, x, k in dst:
+            total = 0.0
+            n = 0
+            for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
+                cy = y + offs[jy]
+                cx = x + offs[jx]
+                m = src_count[cy, cx]
+                total += src[cy, cx, k] * m
+                n += m
+            dst[y, x, k] = total / ti.max(n, 1)
+            if k == 0:
+                count[y, x] = n
+
+    @ti.kernel
+    def _normalise(self, vol: ti.template()):
+        """Min-max normalise a level's volume to [0, 1] over its in-image patches."""
+        self._lo[None] = 1e30
+        self._hi[None] = -1e30
+        for y, x, k in ti.ndrange(self.H, self.W, self.C):
+            ti.atomic_min(self._lo[None], vol[y, x, k])
+            ti.atomic_max(self._hi[None], vol[y, x, k])
+        lo = self._lo[None]
+        scale = 1.0 / ti.max(self._hi[None] - lo, 1e-12)
+        for y, x, k in vol:
+            vol[y, x, k] = (vol[y, x, k] - lo) * scale
+
+    def build_costs(self, left, right):
+        """Fill every level's C_p(c) (patch mean of M, min-max normalised per level).
+
+        ``left``, ``right``: ``ti.Vector.field(3, f32)`` of shape ``(H, W)``, values in [0, 1].
+        Level 1 sums the pixels' matching costs M(x, y, c) = mean_RGB |L(x + c) - R(x - c)|
+        (image coordinates clamped at the borders); each higher level sums its children.
+        """
+        lev0 = self.levels[0]
+        self._cost_from_pixels(left, right, self.cost[0], self.count[0], lev0.offsets)
+        for i in range(1, len(self.levels)):
+            self._cost_from_children(self.cost[i - 1], self.count[i - 1], self.cost[i],
+                                     self.count[i], self.levels[i].offsets)
+        for vol in self.cost:
+            self._normalise(vol)
+
+    # ------------------------------------------------------------------ upward, per iteration
+    @ti.kernel
+    def _up_from_pixels(self, D: ti.template(), phi: ti.template(), phi_plus: ti.template(),
+                        d_sum: ti.template(), phi_max: ti.template(),
+                        phi_plus_min: ti.template(), offs: ti.template()):
+        H, W = self.H, self.W
+        for y, x in d_sum:
+            s = 0.0
+            hi = -1e30
+            lo = 1e30
+            for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
+                py = y + offs[jy]
+                px = x + offs[jx]
+                if 0 <= py < H and 0 <= px < W:
+                    s += D[py, px]
+                    hi = ti.max(hi, phi[py, px])
+                    lo = ti.min(lo, phi_plus[py, px])
+            d_sum[y, x] = s
+            phi_max[y, x] = hi
+            phi_plus_min[y, x] = lo
+
+    @ti.kernel
+    def _up_from_children(self, src_sum: ti.template(), src_max: ti.template(),
+                          src_min: ti.template(), d_sum: ti.template(), phi_max: ti.template(),
+                          phi_plus_min: ti.template(), offs: ti.template()):
+        for y, x in d_sum:
+            s = 0.0
+            hi = -1e30
+            lo = 1e30
+            for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
+                cy = y + offs[jy]
+                cx = x + offs[jx]
+                s += src_sum[cy, cx]
+                hi = ti.max(hi, src_max[cy, cx])
+                lo = ti.min(lo, src_min[cy, cx])
+            d_sum[y, x] = s
+            phi_max[y, x] = hi
+            phi_plus_min[y, x] = lo
+
+    def upward(self, D, phi, phi_plus):
+        """Relay the patch sums of D and the patch extremes of phi and phi(x + delta_theta)
+        from the pixels up through every level (inputs: ``(H, W)`` f32 fields)."""
+        self._up_from_pixels(D, phi, phi_plus, self.d_sum[0], self.phi_max[0],
+                             self.phi_plus_min[0], self.levels[0].offsets)
+        for i in range(1, len(self.levels)):
+            self._up_from_children(self.d_sum[i - 1], self.phi_max[i - 1],
+                                   self.phi_plus_min[i - 1], self.d_sum[i], self.phi_max[i],
+                                   self.phi_plus_min[i], self.levels[i].offsets)
+
+    # ------------------------------------------------------------------ messages (Eq. 4, 5)
+    @ti.kernel
+    def _messages(self, cost: ti.template(), count: ti.template(), d_sum: ti.template(),
+                  phi_max: ti.template(), phi_plus_min: ti.template(), d_p: ti.template(),
+                  sigma_p: ti.template(), valid: ti.template(), relay: ti.template(),
+                  beta: ti.f32, use_prior: ti.i32, use_validity: ti.i32):
+        C = self.C
+        for y, x in d_p:
+            w = 1
+            if use_validity:
+                fg = phi_max[y, x] > 0
+                vis = phi_plus_min[y, x] < 0
+                w = 1 if fg != vis else 0  # Eq. 4: XOR
+            valid[y, x] = w
+            a = 0.0
+            b = 0.0
+            if w == 1:
+                d_mean = d_sum[y, x] / ti.max(count[y, x], 1)
+                lam = beta if use_prior else 0.0
+                best = 1e30
+                arg = 1
+                total = 0.0
+                for k in range(C):
+                    v = cost[y, x, k] + lam * ti.abs(ti.cast(k + 1, ti.f32) - d_mean)
+                    total += v
+                    if v < best:
+                        best = v
+                        arg = k + 1
+                spread = total / C - best
+                sigma = ti.cast(C, ti.f32) / (spread + 1e-8)
+                d_p[y, x] = arg
+                sigma_p[y, x] = sigma
+                a = 1.0 / (sigma * sigma)
+                b = a * arg
+            relay[y, x, 0] = a
+            relay[y, x, 1] = b
+
+    def messages(self, beta, use_prior, use_validity):
+        """Per-patch (d_p, sigma_p) and w_p at every level; seeds the downward relays."""
+        for i in range(len(self.levels)):
+            self._messages(self.cost[i], self.count[i], self.d_sum[i], self.phi_max[i],
+                           self.phi_plus_min[i], self.d_p[i], self.sigma_p[i], self.valid[i],
+                           self.relay[i], float(beta), int(use_prior), int(use_validity))
+
+    # ------------------------------------------------------------------ downward (Eq. 7)
+    @ti.kernel
+    def _down(self, relay: ti.template(), margin: ti.template(), parent_relay: ti.template(),
+              parent_offs: ti.template(), parent_margin: ti.template()):
+        H, W = self.H, self.W
+        for y, x in ti.ndrange((-margin, H + margin), (-margin, W + margin)):
+            inside = 0 <= y < H and 0 <= x < W
+            a = 0.0
+            b = 0.0
+            if inside:
+                a = relay[y, x, 0]
+                b = relay[y, x, 1]
+            for jy, jx in ti.static(ti.ndrange(len(parent_offs), len(parent_offs))):
+                py = y - parent_offs[jy]
+                px = x - parent_offs[jx]
+                if -parent_margin <= py < H + parent_margin and \
+                        -parent_margin <= px < W + parent_margin:
+                    a += parent_relay[py, px, 0]
+                    b += parent_relay[py, px, 1]
+            relay[y, x, 0] = a
+            relay[y, x, 1] = b
+
+    @ti.kernel
+    def _to_pixels(self, relay: ti.template(), offs: ti.template()):
+        for y, x in self.precision:
+            a = 0.0
+            b = 0.0
+            for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
+                a += relay[y - offs[jy], x - offs[jx], 0]
+                b += relay[y - offs[jy], x - offs[jx], 1]
+            self.precision[y, x] = a
+            self.consensus_mean[y, x] = b / a if a > 0 else 0.0
+
+    def downward(self):
+        """Relay the messages down to the pixels: fills ``precision`` (1/sigma^2) and
+        ``consensus_mean`` (d-bar; 0 where no valid patch contains the pixel)."""
+        # the top level has no margin: its relay is just its own messages
+        for i in range(len(self.levels) - 2, -1, -1):
+            up = self.levels[i + 1]
+            self._down(self.relay[i], self.levels[i].margin, self.relay[i + 1], up.offsets,
+                       up.margin)
+        self._to_pixels(self.relay[0], self.levels[0].offsets)
+
+    # ------------------------------------------------------------------ inspection
+    @ti.kernel
+    def _read_curve(self, cost: ti.template(), y: ti.i32, x: ti.i32):
+        for k in range(self.C):
+            self.curve[k] = cost[y, x, k]
+
+    def patch_cost(self, level, y, x):
+        """The normalised patch-mean matching cost C_p(c), ``c = 1 .. c_max``, of one patch."""
+        self._read_curve(self.cost[level], int(y), int(x))
+        return self.curve.to_numpy()

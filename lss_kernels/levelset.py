@@ -1,0 +1,293 @@
+"""The level-set function phi and its evolution: Eq. 2 of the paper.
+
+    dphi/dt = delta_eps(phi) [ -M(x, y, Theta_1) + M(x - delta_theta, y, Theta_2)
+                               + mu ( B(x, y, Theta_1) kappa + N . grad B ) ]
+
+with delta_eps(phi) = (1/pi) / (1 + phi^2), kappa = div(grad phi / |grad phi|) and
+N = grad phi / |grad phi|.  Derivatives are separable Gaussian-derivative filters
+(``curvature_sigma``, half-width 3.5 sigma, symmetric borders: the Neumann condition of Eq. 2);
+kappa is clipped to +-``curvature_clip`` and the boundary term to +-``boundary_clip``.  M is the
+size-3 patch cost (level 1 of the hierarchy) read with linear interpolation in x and c.  After
+every step phi is median-filtered (``median_size`` squared, symmetric borders) and every
+``reinit_every`` steps re-initialised to ``phi_scale`` times a signed distance (the
+re-initialisation comes first, as in the authors' release).
+
+Frame: cyclopean ``(H, W)`` fields indexed ``[y, x]``; phi > 0 is the foreground.
+"""
+import math
+
+import numpy as np
+import taichi as ti
+
+from .costs import gaussian_taps
+from .distance import INF, DistanceTransform
+
+__all__ = ["LevelSet", "median_network"]
+
+
+def median_network(n):
+    """Comparators of Batcher's odd-even merge sort over the next power of two >= n, and the
+    padding that makes one output the median: returns ``(pairs, size, n_low, index)``; pad
+    with ``n_low`` copies of -inf and ``size - n - n_low`` of +inf, sort, read ``index``."""
+    size = 1
+    while size < n:
+        size *= 2
+    pairs = []
+
+    def merge(lo, length, step):
+        double = step * 2
+        if double < length:
+            merge(lo, length, double)
+            merge(lo + step, length, double)
+            for i in range(lo + step, lo + length - step, double):
+                pairs.append((i, i + step))
+        else:
+            pairs.append((lo, lo + step))
+
+    def sort(lo, length):
+        if length > 1:
+            half = length // 2
+            sort(lo, half)
+            sort(lo + half, half)
+            merge(lo, length, 1)
+
+    sort(0, size)
+    n_low = (size - n) // 2
+    return pairs, size, n_low, n_low + (n - 1) // 2
+
+
+@ti.data_oriented
+class LevelSet:
+    """Owns phi, its derivatives, the boundary-term maps and the Eq. 2 step."""
+
+    def __init__(self, pool, height, width, params):
+        self.H, self.W = int(height), int(width)
+        H, W = self.H, self.W
+        f = lambda: pool.field(ti.f32, (H, W))
+        self.phi = f()
+        self.phi_next = f()
+        self.phi_x, self.phi_y = f(), f()
+        self.phi_xx, self.phi_yy, self.phi_xy = f(), f(), f()
+        self.kappa, self.normal_x, self.normal_y = f(), f(), f()
+        self.b_map, self.b_x, self.b_y = f(), f(), f()
+        self._t0, self._t1, self._t2 = f(), f(), f()
+        self.flipped = pool.field(ti.i32, ())
+        self.area = pool.field(ti.i32, ())
+        g, g1, g2 = gaussian_taps(params.curvature_sigma)
+        self.half = (len(g) - 1) // 2
+        self.taps = pool.field(ti.f32, (3, len(g)))
+        self._taps = np.stack([g, g1, g2]).astype(np.float32)
+        self.curvature_clip = float(params.curvature_clip)
+        self.boundary_clip = float(params.boundary_clip)
+        self.median_size = int(params.median_size)
+        self.scale = float(params.phi_scale)
+        self._sd = pool.field(ti.f32, (H, W, 1))
+        self._edt = None
+
+    def setup(self):
+        """Fill constant fields; call once the pool is finalised."""
+        self.taps.from_numpy(self._taps)
+        self._edt = DistanceTransform((self.H, self.W, 1))
+
+    def destroy(self):
+        if self._edt is not None:
+            self._edt.destroy()
+            self._edt = None
+
+    # ---------------------------------------------------------------- helpers
+    @ti.func
+    def _reflect(self, i, n):
+        """Symmetric border: -1 -> 0, -2 -> 1, n -> n - 1 (as MATLAB's 'symmetric')."""
+        j = i
+        if j < 0:
+            j = -j - 1
+        if j >= n:
+            j = 2 * n - j - 1
+        return ti.min(ti.max(j, 0), n - 1)
+
+    @ti.kernel
+    def _conv_x(self, src: ti.template(), dst: ti.template(), order: ti.i32):
+        for y, x in dst:
+            s = 0.0
+            for i in range(-self.half, self.half + 1):
+                s += self.taps[order, i + self.half] * src[y, self._reflect(x - i, self.W)]
+            dst[y, x] = s
+
+    @ti.kernel
+    def _conv_y(self, src: ti.template(), dst: ti.template(), order: ti.i32):
+        for y, x in dst:
+            s = 0.0
+            for i in range(-self.half, self.half + 1):
+                s += self.taps[order, i + self.half] * src[self._reflect(y - i, self.H), x]
+            dst[y, x] = s
+
+    def gradient(self, src, gx, gy):
+        """Gaussian-derivative gradient of an ``(H, W)`` field."""
+        self._conv_x(src, self._t0, 1)
+        self._conv_y(self._t0, gx, 0)
+        self._conv_x(src, self._t0, 0)
+        self._conv_y(self._t0, gy, 1)
+
+    @ti.kernel
+    def _curvature(self):
+        clip = self.curvature_clip
+        for y, x in self.phi:
+            px, py = self.phi_x[y, x], self.phi_y[y, x]
+            g2 = px * px + py * py
+            norm = ti.sqrt(g2) + 1e-10
+            k = (self.phi_xx[y, x] * py * py - 2.0 * px * py * self.phi_xy[y, x]
+                 + self.phi_yy[y, x] * px * px) / (norm * norm * norm)
+            self.kappa[y, x] = ti.min(ti.max(k, -clip), clip)
+            self.normal_x[y, x] = px / norm
+            self.normal_y[y, x] = py / norm
+
+    def derivatives(self):
+        """phi_x, phi_y, kappa and N from the current phi."""
+        self._conv_x(self.phi, self._t0, 0)
+        self._conv_x(self.phi, self._t1, 1)
+        self._conv_x(self.phi, self._t2, 2)
+        self._conv_y(self._t1, self.phi_x, 0)
+        self._conv_y(self._t0, self.phi_y, 1)
+        self._conv_y(self._t2, self.phi_xx, 0)
+        self._conv_y(self._t0, self.phi_yy, 2)
+        self._conv_y(self._t1, self.phi_xy, 1)
+        self._curvature()
+
+    # ---------------------------------------------------------------- boundary weight
+    @ti.kernel
+    def _b_map(self, costs: ti.template(), shapes: ti.template()):
+        for y, x in self.b_map:
+            c = shapes.value(0, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+            self.b_map[y, x] = costs.b_at(y, x, c)
+
+    def boundary_weight(self, costs, shapes):
+        """B(x, y, Theta_1(x, y)) and its gradient."""
+        self._b_map(costs, shapes)
+        self.gradient(self.b_map, self.b_x, self.b_y)
+
+    # ---------------------------------------------------------------- Eq. 2
+    @ti.func
+    def _cost_at(self, cost: ti.template(), y, x, c, C: ti.template()):
+        """M(x, y, c) at real x and c (linear in both; clamped to the volume)."""
+        xf = ti.min(ti.max(x, 0.0), self.W - 1.0)
+        x0 = ti.min(ti.cast(ti.floor(xf), ti.i32), ti.max(self.W - 2, 0))
+        x1 = ti.min(x0 + 1, self.W - 1)
+        tx = xf - x0
+        kf = ti.min(ti.max(c - 1.0, 0.0), C - 1.0)
+        k0 = ti.min(ti.cast(ti.floor(kf), ti.i32), ti.max(C - 2, 0))
+        k1 = ti.min(k0 + 1, C - 1)
+        tk = kf - k0
+        a = (1.0 - tk) * cost[y, x0, k0] + tk * cost[y, x0, k1]
+        b = (1.0 - tk) * cost[y, x1, k0] + tk * cost[y, x1, k1]
+        return (1.0 - tx) * a + tx * b
+
+    @ti.kernel
+    def _step(self, cost: ti.template(), C: ti.template(), shapes: ti.template(),
+              occ: ti.template(), dt: ti.f32, mu: ti.f32):
+        clip = self.boundary_clip
+        for y, x in self.phi:
+            xf = ti.cast(x, ti.f32)
+            yf = ti.cast(y, ti.f32)
+            p = self.phi[y, x]
+            m1 = self._cost_at(cost, y, xf, shapes.value(0, xf, yf), C)
+            m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x], shapes.value(1, xf, yf), C)
+            bt = self.b_map[y, x] * self.kappa[y, x] + \
+                self.normal_x[y, x] * self.b_x[y, x] + self.normal_y[y, x] * self.b_y[y, x]
+            bt = ti.min(ti.max(bt, -clip), clip)
+            dirac = (1.0 / math.pi) / (1.0 + p * p)
+            self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt)
+
+    # ---------------------------------------------------------------- median, re-init
+    @ti.kernel
+    def _median(self, src: ti.template(), dst: ti.template(), k: ti.template(),
+                pairs: ti.template(), size: ti.template(), n_low: ti.template(),
+                index: ti.template()):
+        for y, x in dst:
+            v = ti.Vector.zero(ti.f32, size)
+            for i in ti.static(range(size)):
+                if ti.static(i < n_low):
+                    v[i] = -1e30
+                elif ti.static(i >= n_low + k * k):
+                    v[i] = 1e30
+                else:
+                    dy = ti.static((i - n_low) // k - k // 2)
+                    dx = ti.static((i - n_low) % k - k // 2)
+                    v[i] = src[self._reflect(y + dy, self.H), self._reflect(x + dx, self.W)]
+            for a, b in ti.static(pairs):
+                lo = ti.min(v[a], v[b])
+                hi = ti.max(v[a], v[b])
+                v[a] = lo
+                v[b] = hi
+            dst[y, x] = v[index]
+
+    @ti.kernel
+    def _copy(self, src: ti.template(), dst: ti.template()):
+        for y, x in dst:
+            dst[y, x] = src[y, x]
+
+    @ti.kernel
+    def _features(self, src: ti.template(), foreground: ti.i32):
+        for y, x in src:
+            inside = src[y, x] > 0
+            self._sd[y, x, 0] = 0.0 if inside == (foreground == 1) else INF
+
+    @ti.kernel
+    def _signed(self, phi: ti.template(), foreground: ti.i32, scale: ti.f32):
+        # phi = scale * (distance to the other region - 1/2), the boundary lying between
+        # pixel centres; the distance is capped at the image diagonal
+        cap = ti.sqrt(ti.cast(self.H * self.H + self.W * self.W, ti.f32))
+        for y, x in phi:
+            inside = phi[y, x] > 0
+            if inside == (foreground == 1):
+                # d >= 1 (measured to the nearest pixel of the other region): signs are kept
+                d = ti.min(ti.sqrt(self._sd[y, x, 0]), cap)
+                phi[y, x] = (scale if foreground == 1 else -scale) * (d - 0.5)
+
+    def reinitialise(self, phi):
+        """phi <- phi_scale x signed distance of the region phi > 0, in place (the signs, and
+        so the region, are kept)."""
+        for region in (1, 0):
+            self._features(phi, 1 - region)  # distance to the pixels of the other region
+            self._edt.run(self._sd)
+            self._signed(phi, region, self.scale)
+
+    def median(self, src, dst):
+        k = self.median_size
+        if k == 1:
+            self._copy(src, dst)
+            return
+        pairs, size, n_low, index = median_network(k * k)
+        self._median(src, dst, k, tuple(pairs), size, n_low, index)
+
+    @ti.kernel
+    def _count_flips(self, before: ti.template()):
+        self.flipped[None] = 0
+        self.area[None] = 0
+        for y, x in self.phi:
+            now = self.phi[y, x] > 0
+            if now != (before[y, x] > 0):
+                self.flipped[None] += 1
+            if now:
+                self.area[None] += 1
+
+    def evolve(self, cost, c_max, shapes, occ, params, reinit):
+        """One descent step of Eq. 2, then (every ``reinit_every``) the signed-distance
+        re-initialisation and the median filter.  Leaves the previous phi in ``phi_next`` and
+        counts the pixels whose sign flipped."""
+        self._step(cost, c_max, shapes, occ, params.dt, params.mu)
+        if reinit:
+            self.reinitialise(self.phi_next)
+        self._copy(self.phi, self._t1)      # the previous phi, for the flip count
+        self.median(self.phi_next, self.phi)
+        self._count_flips(self._t1)
+
+    @ti.kernel
+    def _from_mask(self, mask: ti.types.ndarray()):
+        for y, x in self.phi_next:
+            self.phi_next[y, x] = 1.0 if mask[y, x] != 0 else -1.0
+
+    def set_from_mask(self, mask):
+        """phi = phi_scale x signed distance of a boolean ``(H, W)`` mask."""
+        self._from_mask(np.ascontiguousarray(mask, dtype=np.int32))
+        self.reinitialise(self.phi_next)
+        self._copy(self.phi_next, self.phi)

@@ -1,0 +1,178 @@
+"""Global shapes Theta_1 (foreground) and Theta_2 (background): Eq. 8 of the paper.
+
+Each is a quadratic in the cyclopean coordinates, ``Theta_j(x, y) = sum_i theta_j[i] U_i(x, y)``
+with the paper's basis ``U = {x^2, xy, y^2, x, y, 1}``; internally x and y are normalised to
+about [-1, 1] for conditioning (``x_n = (x - cx) / s``, ``y_n = (y - cy) / s``,
+``s = max(H, W) / 2``).  The weighted least-squares fit to the consensus means is solved as
+the paper proposes, by a hierarchical (distributed-averaging) reduction of the normal
+equations: every pixel contributes ``w U U^T`` and ``w U d-bar`` to its region's system, every
+tile sums its children's 21 + 6 terms in a fixed order (so the result does not depend on the
+number of threads), and the root solves the two 6x6 systems.  A region with fewer than 6
+weighted rows, or a singular system, keeps its previous shape.
+"""
+import numpy as np
+import taichi as ti
+
+__all__ = ["GlobalShapes", "to_pixel_coefficients", "basis"]
+
+NB = 6            # basis size
+NT = 21 + 6 + 1   # upper triangle of U U^T, U d, row count
+TILE = 16         # children per tile side at every level of the reduction
+_PAIRS = [(a, b) for a in range(NB) for b in range(a, NB)]  # upper triangle, row-major
+
+
+def basis(xn, yn):
+    """The paper's basis {x^2, xy, y^2, x, y, 1} at (normalised) coordinates."""
+    return np.stack([xn * xn, xn * yn, yn * yn, xn, yn, np.ones_like(xn)], axis=-1)
+
+
+def to_pixel_coefficients(theta, height, width, scale=1.0):
+    """Convert coefficients over normalised coordinates to raw cyclopean pixel coordinates
+    (same basis order), multiplied by ``scale`` (2 gives left-view disparity units)."""
+    cx, cy, s = (width - 1) / 2.0, (height - 1) / 2.0, max(height, width) / 2.0
+    a, b, c, d, e, f = np.asarray(theta, np.float64)
+    # x_n = (x - cx)/s, y_n = (y - cy)/s; expand each monomial
+    A = a / s ** 2
+    B = b / s ** 2
+    Cc = c / s ** 2
+    D = -2 * a * cx / s ** 2 - b * cy / s ** 2 + d / s
+    E = -2 * c * cy / s ** 2 - b * cx / s ** 2 + e / s
+    F = a * cx ** 2 / s ** 2 + b * cx * cy / s ** 2 + c * cy ** 2 / s ** 2 - d * cx / s - e * cy / s + f
+    return scale * np.array([A, B, Cc, D, E, F])
+
+
+@ti.data_oriented
+class GlobalShapes:
+    """Owns Theta (``theta[j, i]``: j = 0 foreground, 1 background; normalised basis,
+    cyclopean disparity units) and the reduction tree."""
+
+    def __init__(self, pool, height, width):
+        self.H, self.W = int(height), int(width)
+        self.cx, self.cy = (self.W - 1) / 2.0, (self.H - 1) / 2.0
+        self.inv_s = 1.0 / (max(self.H, self.W) / 2.0)
+        self.theta = pool.field(ti.f32, (2, NB))
+        self.updated = pool.field(ti.i32, (2,))
+        self.rows = pool.field(ti.f32, (2,))
+        # reduction levels: tiles of TILE x TILE children until one cell is left
+        self.tiles = []
+        h, w = self.H, self.W
+        while True:
+            h, w = -(-h // TILE), -(-w // TILE)
+            self.tiles.append(pool.field(ti.f32, (h, w, 2, NT)))
+            if h == 1 and w == 1:
+                break
+
+    @ti.func
+    def value(self, j, x, y):
+        """Theta_j at real cyclopean pixel coordinates (x, y)."""
+        xn = (x - self.cx) * self.inv_s
+        yn = (y - self.cy) * self.inv_s
+        t0, t1, t2 = self.theta[j, 0], self.theta[j, 1], self.theta[j, 2]
+        t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
+        return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
+
+    @ti.func
+    def dvalue_dx(self, j, x, y):
+        xn = (x - self.cx) * self.inv_s
+        yn = (y - self.cy) * self.inv_s
+        return (2.0 * self.theta[j, 0] * xn + self.theta[j, 1] * yn + self.theta[j, 3]) * self.inv_s
+
+    @ti.kernel
+    def _from_pixels(self, weight_fg: ti.template(), weight_bg: ti.template(),
+                     target: ti.template(), out: ti.template()):
+        for ty, tx in ti.ndrange(out.shape[0], out.shape[1]):
+            acc = ti.Matrix.zero(ti.f32, 2, NT)
+            for iy, ix in ti.ndrange(TILE, TILE):
+                y = ty * TILE + iy
+                x = tx * TILE + ix
+                if y < self.H and x < self.W:
+                    xn = (ti.cast(x, ti.f32) - self.cx) * self.inv_s
+                    yn = (ti.cast(y, ti.f32) - self.cy) * self.inv_s
+                    u = ti.Vector([xn * xn, xn * yn, yn * yn, xn, yn, 1.0])
+                    d = target[y, x]
+                    for j in ti.static(range(2)):
+                        w = weight_fg[y, x] if j == 0 else weight_bg[y, x]
+                        if w > 0:
+                            for n in ti.static(range(len(_PAIRS))):
+                                acc[j, n] += w * u[_PAIRS[n][0]] * u[_PAIRS[n][1]]
+                            for a in ti.static(range(NB)):
+                                acc[j, 21 + a] += w * u[a] * d
+                            acc[j, 27] += 1.0
+            for j, n in ti.static(ti.ndrange(2, NT)):
+                out[ty, tx, j, n] = acc[j, n]
+
+    @ti.kernel
+    def _from_tiles(self, src: ti.template(), out: ti.template()):
+        for ty, tx, j, n in out:
+            s = 0.0
+            for iy, ix in ti.ndrange(TILE, TILE):
+                y = ty * TILE + iy
+                x = tx * TILE + ix
+                if y < src.shape[0] and x < src.shape[1]:
+                    s += src[y, x, j, n]
+            out[ty, tx, j, n] = s
+
+    @ti.kernel
+    def _solve_root(self, root: ti.template()):
+        ti.loop_config(serialize=True)
+        for j in range(2):
+            A = ti.Matrix.zero(ti.f32, NB, NB)
+            rhs = ti.Vector.zero(ti.f32, NB)
+            for n in ti.static(range(len(_PAIRS))):
+                A[_PAIRS[n][0], _PAIRS[n][1]] = root[0, 0, j, n]
+                A[_PAIRS[n][1], _PAIRS[n][0]] = root[0, 0, j, n]
+            for a in ti.static(range(NB)):
+                rhs[a] = root[0, 0, j, 21 + a]
+            self.rows[j] = root[0, 0, j, 27]
+            ok = 1 if root[0, 0, j, 27] >= NB else 0
+            scale = 0.0
+            for a in ti.static(range(NB)):
+                scale = ti.max(scale, ti.abs(A[a, a]))
+            # Gaussian elimination with partial pivoting (unrolled: indices are static)
+            for col in ti.static(range(NB)):
+                piv = col
+                best = ti.abs(A[col, col])
+                for r in ti.static(range(col + 1, NB)):
+                    if ti.abs(A[r, col]) > best:
+                        best = ti.abs(A[r, col])
+                        piv = r
+                if best <= 1e-7 * scale or scale <= 0:
+                    ok = 0
+                for r in ti.static(range(col + 1, NB)):
+                    if piv == r:
+                        for cc in ti.static(range(NB)):
+                            A[col, cc], A[r, cc] = A[r, cc], A[col, cc]
+                        rhs[col], rhs[r] = rhs[r], rhs[col]
+                if ok == 1:
+                    for r in ti.static(range(col + 1, NB)):
+                        f = A[r, col] / A[col, col]
+                        for cc in ti.static(range(col, NB)):
+                            A[r, cc] -= f * A[col, cc]
+                        rhs[r] -= f * rhs[col]
+            if ok == 1:
+                sol = ti.Vector.zero(ti.f32, NB)
+                for i in ti.static(range(NB - 1, -1, -1)):
+                    s = rhs[i]
+                    for cc in ti.static(range(i + 1, NB)):
+                        s -= A[i, cc] * sol[cc]
+                    sol[i] = s / A[i, i]
+                for a in ti.static(range(NB)):
+                    self.theta[j, a] = sol[a]
+            self.updated[j] = ok
+
+    def fit(self, weight_fg, weight_bg, target):
+        """Weighted least squares of ``target`` (``(H, W)``, the consensus mean) over each
+        region, ``weight_*`` (``(H, W)``) being 0 outside it; updates ``theta``."""
+        self._from_pixels(weight_fg, weight_bg, target, self.tiles[0])
+        for src, out in zip(self.tiles, self.tiles[1:]):
+            self._from_tiles(src, out)
+        self._solve_root(self.tiles[-1])
+
+    def set(self, theta_fg, theta_bg):
+        """Set both shapes from normalised-basis coefficients (cyclopean units)."""
+        self.theta.from_numpy(np.stack([theta_fg, theta_bg]).astype(np.float32))
+
+    def pixel_coefficients(self, scale=1.0):
+        """``(2, 6)`` coefficients over raw cyclopean pixel coordinates."""
+        th = self.theta.to_numpy()
+        return np.stack([to_pixel_coefficients(t, self.H, self.W, scale) for t in th])

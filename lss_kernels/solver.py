@@ -1,0 +1,406 @@
+"""The alternation of Sec. 3 and the stopping rule; the public ``solve`` / ``Solver`` / ``Result``.
+
+One iteration (as in the authors' release, with everything a data-parallel kernel):
+
+1. derivatives of phi (normal, curvature, sign of dphi/dx);
+2. upward pass: patch means of D, patch extremes of phi and phi(x + delta_theta) -> w_p (Eq. 4);
+3. patch messages d_p, sigma_p (Eq. 5; no |c - D| prior and all patches valid at iteration 1);
+4. downward pass: the consensus (Eq. 7);
+5. Theta_1 over phi >= 0 and Theta_2 over the visible background, by the hierarchical
+   normal-equation reduction (Eq. 8);
+6. delta_theta and the visible background for the new Theta (the ray cast of Sec. 2);
+7. the Eq. 2 step of phi, then (every ``reinit_every``) signed-distance re-initialisation and
+   the median filter;
+8. D = H(phi) Theta_1 + (1 - H(phi)) Theta_2 (Eq. 3).
+
+The host reads two integers per iteration (flipped pixels and foreground area) for the stopping
+rule; nothing else leaves the device inside the loop.
+"""
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+import taichi as ti
+
+from . import backend
+from .backend import FieldPool
+from .costs import BoundaryCosts
+from .hierarchy import PatchHierarchy
+from .levelset import LevelSet
+from .occlusion import OcclusionGeometry
+from .params import Params
+from .shapes import GlobalShapes
+
+__all__ = ["Result", "Solver", "solve"]
+
+
+@dataclass
+class Result:
+    """Output of :func:`solve`.
+
+    Left view (the user's frame, Middlebury convention): ``disparity`` ``(H, W)`` float32 in
+    left-view pixels (finite, ``>= 0``), ``occlusion`` (seen by the left camera, hidden from
+    the right) and ``foreground`` boolean ``(H, W)``.
+
+    Cyclopean frame (the model's): ``phi`` ``(H, W)`` (> 0 foreground), ``consensus_mean`` and
+    ``consensus_sigma`` ``(H, W)`` in left-view disparity units (sigma = d_max where no valid
+    patch covers the pixel).  ``theta_fg``, ``theta_bg``: coefficients of the left-view
+    disparity (2 Theta_j) over the basis {x^2, xy, y^2, x, y, 1} of raw cyclopean pixel
+    coordinates.  ``iterations`` run, ``stop_reason``, ``timings`` (seconds per stage) and
+    ``history`` (per-iteration statistics).
+    """
+
+    disparity: np.ndarray
+    occlusion: np.ndarray
+    foreground: np.ndarray
+    phi: np.ndarray
+    theta_fg: np.ndarray
+    theta_bg: np.ndarray
+    consensus_mean: np.ndarray
+    consensus_sigma: np.ndarray
+    iterations: int
+    stop_reason: str
+    timings: dict = field(default_factory=dict)
+    history: list = field(default_factory=list)
+
+
+STAGES = ("upward", "messages", "downward", "shapes", "occlusion", "boundary", "levelset",
+          "disparity")
+
+
+@ti.data_oriented
+class Solver:
+    """A two-layer level-set stereo solve that can be stepped one iteration at a time.
+
+    Parameters
+    ----------
+    left, right : array ``(H, W[, C])`` or path
+        Rectified pair; the left image is the reference.
+    d_max : float
+        Largest disparity to search, in left-view pixels (cyclopean ``c_max = ceil(d_max/2)``).
+    init : tuple ``(cx, cy, rx, ry)`` or boolean array ``(H, W)``
+        Initial foreground: an ellipse or a mask, in the frame ``init_frame``.
+    params : Params, optional
+    arch : str, optional
+        Taichi arch; initialises Taichi if given (else uses the current one, or the CPU).
+    init_frame : {"left", "cyclopean"}
+        Frame of ``init``.  A left-view init is moved to the cyclopean frame by half the
+        foreground disparity, estimated as the median consensus mean inside it.
+    profile : bool
+        Synchronise after every stage to time it (slightly slower).
+
+    Examples
+    --------
+    >>> s = Solver(left, right, 64, (80, 60, 30, 25))          # doctest: +SKIP
+    >>> while not s.done:                                      # doctest: +SKIP
+    ...     stats = s.step()
+    >>> result = s.result()                                    # doctest: +SKIP
+    """
+
+    def __init__(self, left, right, d_max, init, params=None, arch=None, init_frame="left",
+                 profile=False):
+        from .validate import check_inputs
+        t_start = time.perf_counter()
+        if arch is not None:
+            backend.init(arch=arch)
+        else:
+            backend.ensure_init()
+        self.params = params if params is not None else Params()
+        if not isinstance(self.params, Params):
+            raise TypeError(f"params: expected lss_kernels.Params, got {type(params).__name__}")
+        left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
+                                                self.params)
+        self.left_image = left
+        self.H, self.W = left.shape[:2]
+        self.d_max = float(d_max)
+        self.c_max = max(1, int(np.ceil(self.d_max / 2.0)))
+        self.profile = profile
+        H, W, C = self.H, self.W, self.c_max
+
+        pool = FieldPool()
+        self.pool = pool
+        self.left = pool.vector(3, ti.f32, (H, W))
+        self.right = pool.vector(3, ti.f32, (H, W))
+        self.hierarchy = PatchHierarchy(pool, H, W, C, self.params.patch_sizes)
+        self.costs = BoundaryCosts(pool, H, W, C)
+        self.shapes = GlobalShapes(pool, H, W)
+        self.occ = OcclusionGeometry(pool, H, W, C)
+        self.levelset = LevelSet(pool, H, W, self.params)
+        self.D = pool.field(ti.f32, (H, W))
+        self.weight_fg = pool.field(ti.f32, (H, W))
+        self.weight_bg = pool.field(ti.f32, (H, W))
+        pool.finalize()
+        self.levelset.setup()
+        self.left.from_numpy(left)
+        self.right.from_numpy(right)
+
+        t0 = time.perf_counter()
+        self.hierarchy.build_costs(self.left, self.right)
+        self.costs.build(self.hierarchy.cost[0], self.left, self.right, self.params)
+        ti.sync()
+        self.timings = {"setup_costs": time.perf_counter() - t0}
+        self.timings.update({s: 0.0 for s in STAGES})
+
+        self.initial_mask = self._initial_mask(init, init_frame)
+        self.levelset.set_from_mask(self.initial_mask)
+        self.iteration = 0
+        self.done = False
+        self.stop_reason = None
+        self.history = []
+        self._flips = deque(maxlen=self.params.stop_window)
+        self._t_loop = 0.0
+        self.timings["setup_total"] = time.perf_counter() - t_start
+
+    # ------------------------------------------------------------------ initialisation
+    def _initial_mask(self, init, init_frame):
+        """The initial foreground in the cyclopean frame; also keeps it in the left view.
+
+        Frames differ by half the foreground's disparity (x_left = x_c + c), estimated from the
+        first consensus."""
+        H, W = self.H, self.W
+        if isinstance(init, np.ndarray):
+            region = lambda shift: _shift_columns(init, shift)
+        else:
+            cx, cy, rx, ry = (float(v) for v in init)
+            y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+            region = lambda shift: ((x - cx - shift) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0
+        shift = self._foreground_shift(region(0.0))
+        if init_frame == "left":
+            self.initial_left = region(0.0)
+            return region(-shift)
+        self.initial_left = region(shift)
+        return region(0.0)
+
+    def _foreground_shift(self, left_mask):
+        """Half the foreground's left-view disparity: the median first consensus mean over
+        the initial region (read as if the frames coincided)."""
+        self.hierarchy.messages(0.0, False, False)
+        self.hierarchy.downward()
+        mean = self.hierarchy.consensus_mean.to_numpy()
+        prec = self.hierarchy.precision.to_numpy()
+        sel = left_mask & (prec > 0)
+        return float(np.median(mean[sel])) if sel.any() else 0.0
+
+    # ------------------------------------------------------------------ small kernels
+    @ti.kernel
+    def _region_weights(self, power: ti.i32):
+        for y, x in self.D:
+            p = self.hierarchy.precision[y, x]
+            w = p if power == 1 else p * p
+            phi = self.levelset.phi[y, x]
+            self.weight_fg[y, x] = w if phi >= 0 else 0.0
+            self.weight_bg[y, x] = w if (phi < 0 and self.occ.phi_plus[y, x] < 0) else 0.0
+
+    @ti.kernel
+    def _refresh_phi_plus(self):
+        for y, x in self.D:
+            self.occ.phi_plus[y, x] = self.occ.sample_row(
+                self.levelset.phi, y, ti.cast(x, ti.f32) + self.occ.delta_theta[y, x])
+
+    @ti.kernel
+    def _update_D(self):
+        for y, x in self.D:
+            j = 0 if self.levelset.phi[y, x] > 0 else 1
+            self.D[y, x] = self.shapes.value(j, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+
+    # ------------------------------------------------------------------ the iteration
+    def _stage(self, name, t):
+        if self.profile:
+            ti.sync()
+            now = time.perf_counter()
+            self.timings[name] += now - t
+            return now
+        return t
+
+    def step(self):
+        """Run one iteration; returns its statistics (a dict)."""
+        if self.done:
+            raise RuntimeError("step: the solver has already stopped "
+                               f"({self.stop_reason}); build a new Solver to run again")
+        p = self.params
+        t_iter = time.perf_counter()
+        self.iteration += 1
+        first = self.iteration == 1
+        ls, hier = self.levelset, self.hierarchy
+        t = t_iter
+        ls.derivatives()
+        self._refresh_phi_plus()
+        if not first:
+            hier.upward(self.D, ls.phi, self.occ.phi_plus)
+        t = self._stage("upward", t)
+        hier.messages(p.beta / self.c_max, not first, not first)
+        t = self._stage("messages", t)
+        hier.downward()
+        t = self._stage("downward", t)
+        self._region_weights(p.shape_weight_power)
+        self.shapes.fit(self.weight_fg, self.weight_bg, hier.consensus_mean)
+        t = self._stage("shapes", t)
+        self.occ.compute(self.shapes, ls.phi, ls.phi_x, 1)
+        t = self._stage("occlusion", t)
+        ls.boundary_weight(self.costs, self.shapes)
+        t = self._stage("boundary", t)
+        reinit = self.iteration % p.reinit_every == 0
+        ls.evolve(hier.cost[0], self.c_max, self.shapes, self.occ, p, reinit)
+        t = self._stage("levelset", t)
+        self._update_D()
+        t = self._stage("disparity", t)
+        flipped = int(ls.flipped[None])
+        area = int(ls.area[None])
+        seconds = time.perf_counter() - t_iter
+        self._t_loop += seconds
+        self._flips.append(flipped)
+        moving = sum(self._flips) / max(area, 1)
+        stats = dict(iteration=self.iteration, flipped=flipped, moving_fraction=moving,
+                     fg_fraction=area / float(self.H * self.W), seconds=seconds)
+        self.history.append(stats)
+        self._check_stop(area, moving)
+        return stats
+
+    def _check_stop(self, area, moving):
+        p = self.params
+        if area == 0:
+            self.stop_reason = f"foreground vanished at iteration {self.iteration}"
+        elif area == self.H * self.W:
+            self.stop_reason = f"foreground filled the image at iteration {self.iteration}"
+        elif (p.stop_fraction > 0 and self.iteration >= max(p.min_iterations, p.stop_window)
+              and moving < p.stop_fraction):
+            self.stop_reason = (f"converged at iteration {self.iteration}: "
+                                f"{moving:.4f} of the foreground flipped in the last "
+                                f"{p.stop_window} iterations (< {p.stop_fraction})")
+        elif self.iteration >= p.max_iterations:
+            self.stop_reason = f"reached the iteration cap ({p.max_iterations})"
+        self.done = self.stop_reason is not None
+
+    def run(self, callback=None):
+        """Step until the stopping rule or the cap; ``callback(solver, stats)`` after each
+        iteration (return ``False`` from it to stop early).  Returns :class:`Result`."""
+        while not self.done:
+            stats = self.step()
+            if callback is not None and callback(self, stats) is False:
+                self.stop_reason = f"stopped by the callback at iteration {self.iteration}"
+                self.done = True
+        return self.result()
+
+    # ------------------------------------------------------------------ outputs
+    def left_view(self):
+        """Left-view ``(disparity, occlusion, foreground)`` of the current model."""
+        self.occ.render_left(self.shapes, self.levelset.phi)
+        d = self.occ.disparity_left.to_numpy()
+        return (np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32),
+                self.occ.occlusion_left.to_numpy().astype(bool),
+                self.occ.foreground_left.to_numpy().astype(bool))
+
+    def consensus(self):
+        """Consensus mean and sigma, cyclopean frame, left-view disparity units."""
+        prec = self.hierarchy.precision.to_numpy()
+        mean = 2.0 * self.hierarchy.consensus_mean.to_numpy()
+        with np.errstate(divide="ignore"):
+            sigma = np.where(prec > 0, 2.0 / np.sqrt(np.maximum(prec, 1e-30)), self.d_max)
+        return mean.astype(np.float32), np.minimum(sigma, self.d_max).astype(np.float32)
+
+    def snapshot(self):
+        """Current state as numpy arrays (see :class:`Result` for frames and units)."""
+        disparity, occlusion, foreground = self.left_view()
+        mean, sigma = self.consensus()
+        return dict(phi=self.levelset.phi.to_numpy(), consensus_mean=mean,
+                    consensus_sigma=sigma, disparity=disparity, occlusion=occlusion,
+                    foreground=foreground, initial_foreground=self.initial_foreground_left(),
+                    D=2.0 * self.D.to_numpy())
+
+    def initial_foreground_left(self):
+        """The initial foreground in the left view."""
+        return self.initial_left
+
+    def patch_curve(self, level, x, y):
+        """Everything about one patch (cyclopean ``x, y``; ``level`` indexes
+        ``params.patch_sizes``), in left-view disparity units: the candidates ``d``, C_p(d)
+        with the beta |d - D| term (``cost``), the patch-mean matching cost, d_p, sigma_p,
+        validity and the patch mean of D."""
+        h = self.hierarchy
+        x, y = int(x), int(y)
+        if not (0 <= level < len(h.levels)) or not (0 <= x < self.W and 0 <= y < self.H):
+            raise ValueError(f"patch_curve: level in [0, {len(h.levels) - 1}], x in "
+                             f"[0, {self.W - 1}], y in [0, {self.H - 1}] expected, got "
+                             f"level={level}, x={x}, y={y}")
+        matching = h.patch_cost(level, y, x).astype(np.float64)
+        c = np.arange(1, self.c_max + 1, dtype=np.float64)
+        d_mean = h.d_sum[level][y, x] / max(h.count[level][y, x], 1)
+        beta = self.params.beta / self.c_max if self.iteration > 1 else 0.0
+        cost = matching + beta * np.abs(c - d_mean)
+        return dict(d=2 * c, cost=cost, matching_cost=matching, d_p=2.0 * h.d_p[level][y, x],
+                    sigma_p=2.0 * h.sigma_p[level][y, x], valid=bool(h.valid[level][y, x]),
+                    mean_D=2.0 * d_mean)
+
+    def result(self):
+        """The current model as a :class:`Result`."""
+        disparity, occlusion, foreground = self.left_view()
+        mean, sigma = self.consensus()
+        th = self.shapes.pixel_coefficients(2.0)
+        timings = dict(self.timings)
+        timings["iterations_total"] = self._t_loop
+        timings["total"] = self.timings["setup_total"] + self._t_loop
+        return Result(disparity=disparity, occlusion=occlusion, foreground=foreground,
+                      phi=self.levelset.phi.to_numpy(), theta_fg=th[0], theta_bg=th[1],
+                      consensus_mean=mean, consensus_sigma=sigma, iterations=self.iteration,
+                      stop_reason=self.stop_reason or "not finished", timings=timings,
+                      history=list(self.history))
+
+    def close(self):
+        """Free the solver's device memory (the object cannot be used afterwards)."""
+        self.levelset.destroy()
+        self.pool.destroy()
+
+    @property
+    def memory_bytes(self):
+        """Bytes held by the solver's fields."""
+        return self.pool.nbytes
+
+
+def _shift_columns(mask, shift):
+    """A boolean mask moved right by ``round(shift)`` columns (left if negative)."""
+    k = int(round(shift))
+    out = np.zeros_like(mask, dtype=bool)
+    if k >= 0:
+        out[:, k:] = mask[:, :mask.shape[1] - k]
+    else:
+        out[:, :k] = mask[:, -k:]
+    return out
+
+
+def solve(left, right, d_max, init, params=None, arch=None, callback=None, init_frame="left",
+          profile=False):
+    """Solve a rectified pair with the two-layer level-set model (the whole paper).
+
+    Parameters
+    ----------
+    left, right : array ``(H, W[, C])`` or path
+        Rectified pair; the left image is the reference (``x_right = x_left - d``).
+    d_max : float
+        Largest disparity to search, left-view pixels.
+    init : tuple ``(cx, cy, rx, ry)`` or boolean array ``(H, W)``
+        Initial foreground (an ellipse in pixel coordinates, or a mask).
+    params : Params, optional
+    arch : str, optional
+        Taichi arch (``"cpu"``, ``"cuda"``, ``"vulkan"``, ...).
+    callback : callable, optional
+        ``callback(solver, stats)`` after every iteration; return ``False`` to stop.
+    init_frame : {"left", "cyclopean"}
+        Frame of ``init``.
+
+    Returns
+    -------
+    Result
+        Left-view disparity, occlusion and foreground; the model (phi, Theta) and the
+        consensus in the cyclopean frame.
+
+    References
+    ----------
+    J. Wang and T. Zickler, "Level Set Stereo for Cooperative Grouping with Occlusion".
+    """
+    solver = Solver(left, right, d_max, init, params=params, arch=arch, init_frame=init_frame,
+                    profile=profile)
+    try:
+        return solver.run(callback)
+    finally:
+        solver.close()

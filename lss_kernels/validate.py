@@ -1,0 +1,93 @@
+"""Validation at the API boundary: every check names the argument, what was expected and what
+was given, so that bad input never reaches a kernel."""
+import math
+import numbers
+
+import numpy as np
+
+__all__ = ["check_inputs", "check_init", "parse_init"]
+
+
+def _largest_patch(params):
+    return max(params.patch_sizes)
+
+
+def check_inputs(left, right, d_max, init, init_frame, params):
+    """Read and check the solver's inputs; returns ``(left, right, d_max, init)`` with the
+    images as float32 ``(H, W, 3)`` in [0, 1] and ``init`` as an ellipse tuple or a boolean
+    mask."""
+    from .io import read_image
+    left = read_image(left, name="left")
+    right = read_image(right, name="right")
+    if left.shape != right.shape:
+        raise ValueError(f"right: expected the size of left ({left.shape[1]}x{left.shape[0]}), "
+                         f"got {right.shape[1]}x{right.shape[0]}")
+    H, W = left.shape[:2]
+    need = _largest_patch(params)
+    if H < need or W < need:
+        raise ValueError(f"left: expected an image at least {need}x{need} pixels (the largest "
+                         f"patch), got {W}x{H}")
+    if isinstance(d_max, bool) or not isinstance(d_max, numbers.Real) or not math.isfinite(d_max):
+        raise ValueError(f"d_max: expected a finite number of pixels, got {d_max!r}")
+    if not 0 < d_max < W:
+        raise ValueError(f"d_max: expected 0 < d_max < image width ({W}), got {d_max}")
+    if init_frame not in ("left", "cyclopean"):
+        raise ValueError(f"init_frame: expected 'left' or 'cyclopean', got {init_frame!r}")
+    return left, right, float(d_max), check_init(init, (H, W))
+
+
+def check_init(init, shape):
+    """An ellipse ``(cx, cy, rx, ry)`` that overlaps the image with positive radii, or a
+    non-empty boolean mask of the image's shape."""
+    H, W = shape
+    if isinstance(init, np.ndarray) and init.ndim == 2:
+        if init.shape != (H, W):
+            raise ValueError(f"init: expected a mask of shape {(H, W)}, got {init.shape}")
+        mask = init.astype(bool) if init.dtype == bool else np.asarray(init) != 0
+        if not mask.any():
+            raise ValueError("init: the mask is empty (no foreground pixel)")
+        if mask.all():
+            raise ValueError("init: the mask covers the whole image (no background pixel)")
+        return mask
+    try:
+        values = tuple(float(v) for v in init)
+    except (TypeError, ValueError):
+        raise ValueError(f"init: expected an ellipse (cx, cy, rx, ry) or a boolean mask, "
+                         f"got {init!r}") from None
+    if len(values) != 4:
+        raise ValueError(f"init: expected an ellipse of 4 numbers (cx, cy, rx, ry), "
+                         f"got {len(values)}")
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"init: expected finite numbers, got {values}")
+    cx, cy, rx, ry = values
+    if rx <= 0 or ry <= 0:
+        raise ValueError(f"init: expected positive radii, got rx={rx:g}, ry={ry:g}")
+    if not (-rx < cx < W - 1 + rx and -ry < cy < H - 1 + ry):
+        raise ValueError(f"init: the ellipse centred at ({cx:g}, {cy:g}) with radii "
+                         f"({rx:g}, {ry:g}) lies outside the {W}x{H} image")
+    y, x = np.mgrid[0:H, 0:W]
+    if not (((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0).any():
+        raise ValueError(f"init: the ellipse ({cx:g}, {cy:g}, {rx:g}, {ry:g}) covers no pixel "
+                         f"of the {W}x{H} image")
+    return values
+
+
+def parse_init(text):
+    """Parse the CLI's ``--init``: ``ellipse:CX,CY,RX,RY`` or ``mask:PATH`` (or a PNG path)."""
+    if not isinstance(text, str) or not text:
+        raise ValueError(f"--init: expected ellipse:CX,CY,RX,RY or mask:PATH, got {text!r}")
+    kind, _, rest = text.partition(":")
+    if kind == "ellipse":
+        parts = rest.split(",")
+        try:
+            values = tuple(float(p) for p in parts)
+        except ValueError:
+            values = ()
+        if len(values) != 4:
+            raise ValueError(f"--init: expected ellipse:CX,CY,RX,RY with 4 numbers, got {text!r}")
+        return values
+    if kind == "mask" or text.lower().endswith(".png"):
+        from .io import read_mask
+        return read_mask(rest if kind == "mask" else text, name="--init")
+    raise ValueError(f"--init: unknown kind {kind!r}; expected ellipse:CX,CY,RX,RY or "
+                     f"mask:PATH")
