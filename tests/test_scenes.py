@@ -1,0 +1,152 @@
+"""Rendered two-layer scenes: the images agree with their exact ground truth."""
+import numpy as np
+import pytest
+
+from lss_kernels.io import load_scene
+from lss_kernels.metrics import band_from_foreground, boundary_from_foreground, score
+from lss_kernels.scenes import PRESETS, disparity_coefficients, make_scene, write_scene
+
+
+def _grid(scene):
+    h, w = scene.disp_left.shape
+    return np.mgrid[0:h, 0:w]
+
+
+def _u(x, y):
+    return np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], -1).astype(np.float64)
+
+
+@pytest.mark.parametrize("preset", ["easy", "tiny"])
+def test_fronto_parallel_pair_matches_truth_exactly(preset):
+    """Integer disparities: every visible left pixel lands on a right pixel of the same colour."""
+    scene = make_scene(preset, seed=4)
+    y, x = _grid(scene)
+    xr = x - scene.disp_left.astype(int)
+    visible = ~scene.occ_left
+    assert visible.mean() > 0.7 and (xr[visible] >= 0).all()
+    np.testing.assert_allclose(scene.left[visible], scene.right[y[visible], xr[visible]],
+                               atol=1e-5)
+    # Occluded background pixels show something else in the right view (the foreground).
+    inner = scene.occ_left & (xr >= 0)
+    assert inner.any()
+    assert np.abs(scene.left[inner] - scene.right[y[inner], xr[inner]]).max() > 0.05
+
+
+def test_slanted_pair_matches_truth():
+    """Non-integer disparities: the right image sampled at x - d reproduces the left image up to
+    linear interpolation of the texture, away from depth discontinuities."""
+    scene = make_scene("slanted", noise=0.0)
+    h, w = scene.disp_left.shape
+    y, x = _grid(scene)
+    xr = x - scene.disp_left
+    assert np.abs(xr - np.round(xr)).max() > 0.3
+    edges = scene.occ_left | boundary_from_foreground(scene.fg_left) \
+        | boundary_from_foreground(~scene.fg_left)
+    near = np.logical_or(*band_from_foreground(edges, radius=2))  # within 2 px of an edge
+    ok = ~scene.occ_left & ~near & (xr >= 0) & (xr <= w - 1)
+    i0 = np.clip(np.floor(xr).astype(int), 0, w - 2)
+    f = (xr - i0)[..., None]
+    sampled = (1 - f) * scene.right[y, i0] + f * scene.right[y, i0 + 1]
+    err = np.abs(sampled - scene.left).max(-1)[ok]
+    assert ok.sum() > 0.6 * h * w
+    assert np.median(err) < 0.02 and err.max() < 0.15
+
+
+def test_disparity_is_the_quadratic():
+    scene = make_scene("slanted")
+    y, x = _grid(scene)
+    u = _u(x, y)
+    theta_fg, theta_bg = (np.array(scene.meta[k]) for k in ("theta_fg", "theta_bg"))
+    expected = np.where(scene.fg_left, u @ theta_fg, u @ theta_bg)
+    np.testing.assert_allclose(scene.disp_left, expected, rtol=1e-6)
+    cx, cy, rx, ry = scene.meta["ellipse"]
+    np.testing.assert_array_equal(scene.fg_left, ((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1)
+
+
+def test_disparity_coefficients():
+    theta = disparity_coefficients(10.0, slope=(0.1, -0.2), curvature=(0.01, 0.02, 0.03),
+                                   centre=(5.0, 7.0))
+    for px, py in [(5.0, 7.0), (0.0, 0.0), (9.0, 2.0)]:
+        u, v = px - 5.0, py - 7.0
+        want = 10 + 0.1 * u - 0.2 * v + 0.01 * u * u + 0.02 * u * v + 0.03 * v * v
+        assert _u(np.array(px), np.array(py)) @ np.array(theta) == pytest.approx(want)
+
+
+@pytest.mark.parametrize("d_fg, d_bg", [(24.0, 8.0), (20.0, 5.0), (13.5, 6.0)])
+def test_occlusion_width_is_the_disparity_jump(d_fg, d_bg):
+    """Left of a fronto-parallel foreground, the occluded run is d_fg - d_bg pixels wide."""
+    scene = make_scene("easy", d_fg=d_fg, d_bg=d_bg)
+    jump = d_fg - d_bg
+    rows = 0
+    for y in range(scene.fg_left.shape[0]):
+        fg_x = np.flatnonzero(scene.fg_left[y])
+        if fg_x.size < jump + 2:             # narrow rows: the run detaches from the edge
+            continue
+        edge = fg_x[0]
+        run = 0
+        while scene.occ_left[y, edge - 1 - run] and not scene.fg_left[y, edge - 1 - run]:
+            run += 1
+        assert abs(run - jump) <= 1, (y, run)
+        rows += 1
+    assert rows > 20
+    # No foreground pixel is occluded; the left border strip (x - d_bg < -0.5) is.
+    assert not (scene.occ_left & scene.fg_left).any()
+    assert scene.occ_left[:, :int(np.ceil(d_bg - 0.5))].all()
+
+
+def test_ground_truth_fields_and_perfect_score():
+    scene = make_scene("tiny")
+    h, w = 48, 64
+    assert scene.left.shape == scene.right.shape == (h, w, 3)
+    assert scene.left.dtype == scene.right.dtype == scene.disp_left.dtype == np.float32
+    for key in ("fg_left", "occ_left", "roi_fg", "roi_bg", "boundary"):
+        assert getattr(scene, key).shape == (h, w) and getattr(scene, key).dtype == bool
+    assert np.isfinite(scene.disp_left).all()
+    assert scene.d_max % 2 == 0 and scene.disp_left.max() + 2 <= scene.d_max
+    np.testing.assert_array_equal(scene.boundary, boundary_from_foreground(scene.fg_left))
+    # The left image is quantised to 8 bits (a PNG round trip is exact).
+    np.testing.assert_array_equal(np.round(scene.left * 255) / 255, scene.left)
+    # init: the true ellipse shrunk and shifted; cyclopean = left shifted by -d_fg(centre)/2.
+    cx, cy, rx, ry = scene.meta["ellipse"]
+    ix, iy, irx, iry = scene.init_ellipse
+    assert irx < rx and iry < ry and (ix, iy) != (cx, cy)
+    assert scene.init_ellipse_cyclopean == pytest.approx((ix - 6.0, iy, irx, iry))
+    s = score(scene.disp_left, scene.occ_left, scene)
+    assert (s["occ_f1"], s["bad4"]) == (1.0, 0.0) and s["n_true_occ"] > 0
+
+
+def test_determinism_and_noise():
+    a, b = make_scene("tiny", seed=7), make_scene("tiny", seed=7)
+    for key in ("left", "right", "disp_left", "occ_left"):
+        np.testing.assert_array_equal(getattr(a, key), getattr(b, key))
+    assert not np.array_equal(a.left, make_scene("tiny", seed=8).left)
+    noisy = make_scene("tiny", seed=7, noise=0.05, quantize=False)
+    residual = noisy.left - make_scene("tiny", seed=7, quantize=False).left
+    assert 0.03 < residual.std() < 0.06
+
+
+def test_round_trip_through_folder(tmp_path):
+    scene = write_scene(tmp_path / "s", "slanted", seed=2)
+    back = load_scene(tmp_path / "s")
+    for key in ("left", "right", "disp_left", "fg_left", "occ_left", "roi_fg", "roi_bg",
+                "boundary"):
+        np.testing.assert_array_equal(getattr(back, key), getattr(scene, key), err_msg=key)
+    assert back.d_max == scene.d_max and back.name == scene.name == "slanted_seed2"
+    assert back.init_ellipse == pytest.approx(scene.init_ellipse)
+    assert back.init_ellipse_cyclopean == pytest.approx(scene.init_ellipse_cyclopean)
+    assert back.meta["seed"] == 2 and back.meta["spec"]["noise"] == PRESETS["slanted"]["noise"]
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"preset": "nope"}, "preset: unknown 'nope'"),
+    ({"colour": 1}, "unknown parameter"),
+    ({"d_fg": 5.0, "d_bg": 8.0}, "foreground must be in front"),
+    ({"d_fg": (1, 2)}, "d_fg: expected a number or 6 finite coefficients"),
+    ({"d_bg": -1.0}, "d_bg: disparity must be >= 0"),
+    ({"d_fg": disparity_coefficients(24.0, slope=(1.0, 0.0))}, "d_fg: d/dx must stay below"),
+    ({"ellipse": (500.0, 500.0, 3.0, 3.0)}, "covers no pixel"),
+])
+def test_errors(kwargs, message):
+    preset = kwargs.pop("preset", "easy")
+    with pytest.raises(ValueError, match=message):
+        make_scene(preset, **kwargs)
