@@ -10,7 +10,7 @@ The demo steps a :class:`~lss_kernels.Solver` and every ``every`` iterations rec
 * the disparity message of one patch, drawn as in Fig. 1(a) (Eq. 6).
 
 Outputs under ``out``: ``frames/frame_0000.png ...``, ``evolution.gif`` (loops forever; one frame
-per recorded iteration, iteration 0 first and the final state last), ``patch.png`` (Fig. 1(a)),
+per recorded iteration ``every, 2 every, ...`` and the final state last), ``patch.png`` (Fig. 1(a)),
 and the final ``disparity.png`` and ``overlay.png`` (left view, the input's size).
 
 Command line (registered by :func:`add_cli`)::
@@ -105,9 +105,10 @@ def parse_patch(text: str, n_levels: int | None = None):
 
 def recorded_iterations(n_iterations: int, every: int) -> list:
     """The iterations at which :func:`run_demo` records a frame when the solver runs
-    ``n_iterations`` steps: 0, every, 2 every, ... and the last one."""
-    its = list(range(0, n_iterations + 1, every))
-    if its[-1] != n_iterations:
+    ``n_iterations`` steps: every, 2 every, ... and the last one.  (Iteration 0 is not
+    recorded: the consensus and the messages exist only after the first step.)"""
+    its = list(range(every, n_iterations + 1, every))
+    if not its or its[-1] != n_iterations:
         its.append(n_iterations)
     return its
 
@@ -155,7 +156,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
     out : str or path-like
         Output folder (created).
     every : int
-        Record a frame every this many iterations (plus iteration 0 and the last one).
+        Record a frame every this many iterations (and after the last one).
     max_iterations : int or None
         Iteration cap (``None``: ``params.max_iterations``).
     patch : (x, y, level) or None
@@ -196,11 +197,11 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
     t0 = time.perf_counter()
     solver = Solver(left, right, d_max, init, params=params, arch=arch, init_frame=init_frame)
     n_levels = len(solver.params.patch_sizes)
-    snap = solver.snapshot()
+    phi0 = solver.result().phi          # the initial phi (cyclopean), before any step
     if patch is None:
-        patch = default_patch(snap["phi"], n_levels)
+        patch = default_patch(phi0, n_levels)
     px, py, plevel = (int(v) for v in patch)
-    h, w = snap["phi"].shape
+    h, w = phi0.shape
     if not (0 <= px < w and 0 <= py < h and 0 <= plevel < n_levels):
         raise ValueError(f"patch: ({px}, {py}, {plevel}) is outside the {w}x{h} grid or the "
                          f"{n_levels} levels")
@@ -208,6 +209,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
 
     frames, frame_paths, curves = [], [], []
     last_info = {}
+    snap = None
 
     def record(snapshot):
         it = solver.iteration
@@ -226,18 +228,20 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
                          f"  moving {last_info['moving_fraction']:.4f}"
                          f"  step {1e3 * last_info['seconds']:7.1f} ms")
             if scores:
-                line += f"  occ F1 {float(scores['occ_f1']):.3f}  bad-4.0 {float(scores['bad4']):.3g}"
+                line += (f"  occ F1 {float(scores['occ_f1']):.3f}"
+                         f"  bad-4.0 {float(scores['bad4']):.1f}%")
             print(line, flush=True)
 
-    record(snap)
-    recorded = {0}
+    recorded = set()
     while not solver.done and solver.iteration < params.max_iterations:
         last_info = solver.step()
         if solver.iteration % every == 0:
-            record(solver.snapshot())
+            snap = solver.snapshot()
+            record(snap)
             recorded.add(solver.iteration)
     if solver.iteration not in recorded:
-        record(solver.snapshot())
+        snap = solver.snapshot()
+        record(snap)
 
     gif_path = os.path.join(out, "evolution.gif")
     durations = [250] * (len(frames) - 1) + [1500]

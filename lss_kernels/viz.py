@@ -396,7 +396,8 @@ def evolution_frame(left, snapshot, d_max, iteration, true_disparity=None, score
     iteration : int
     true_disparity : (H, W) float or None
     scores : dict or None
-        ``occ_f1`` and ``bad4`` shown in the caption.
+        ``occ_f1`` (in [0, 1]) and ``bad4`` (a percentage, :func:`lss_kernels.metrics.score`)
+        shown in the caption.
     panel_px : int
         Width of one panel in pixels.
 
@@ -451,14 +452,14 @@ def evolution_frame(left, snapshot, d_max, iteration, true_disparity=None, score
         if "occ_f1" in scores:
             caption += f"   occlusion F1 {float(scores['occ_f1']):.2f}"
         if "bad4" in scores:
-            caption += f"   bad-4.0 {float(scores['bad4']):.3g}"
+            caption += f"   bad-4.0 {float(scores['bad4']):.1f}%"
     caption += f"   (colour range 0–{d_max:g} px)"
     fig.text(0.5, 4.0 / fig_h, caption, ha="center", va="bottom", fontsize=9)
     return render_figure(fig, size=(fig_h, fig_w))
 
 
 def patch_message_figure(records, left=None, patch_box=None, title=None,
-                         width_px: int = 760, height_px: int = 330, dpi: int = 100) -> Figure:
+                         width_px: int = 760, height_px: int = 440, dpi: int = 100) -> Figure:
     """A figure like the paper's Fig. 1(a): the evolution of one patch's disparity message.
 
     Parameters
@@ -468,7 +469,9 @@ def patch_message_figure(records, left=None, patch_box=None, title=None,
         ``matching_cost`` (K,) patch-mean M, ``d_p``, ``sigma_p``, ``valid``, ``mean_D``
         (left-view disparity units).  Each record draws the Gaussian f_p(d) of Eq. 6 in a
         colour of its iteration and a dashed line at the patch mean of D.  The patch-mean
-        matching cost of the last record is drawn in black.
+        matching cost of the last record is drawn in black.  A second, smaller plot below
+        gives d_p +- sigma_p and the patch mean of D against the iteration (Eq. 6 is nearly
+        flat when sigma_p is much wider than the disparity range).
     left : (H, W, 3) float or None
         If given, a side panel shows it with the patch outlined in red.
     patch_box : (x0, y0, size) or None
@@ -483,7 +486,7 @@ def patch_message_figure(records, left=None, patch_box=None, title=None,
 
     fig = new_figure(width_px, height_px, dpi)
     if left is not None:
-        ax = fig.add_axes((0.70, 0.14, 0.28, 0.72))
+        ax = fig.add_axes((0.70, 0.30, 0.28, 0.56))
         ax.imshow(_as_rgb(left, "left"), interpolation="nearest")
         ax.set_xticks([])
         ax.set_yticks([])
@@ -492,11 +495,13 @@ def patch_message_figure(records, left=None, patch_box=None, title=None,
             x0, y0, size = patch_box
             ax.add_patch(Rectangle((x0 - 0.5, y0 - 0.5), size, size, fill=False,
                                    edgecolor="red", linewidth=1.5))
-        axc = fig.add_axes((0.08, 0.14, 0.52, 0.72))
-        cbar_box = (0.615, 0.14, 0.015, 0.72)
+        axc = fig.add_axes((0.08, 0.44, 0.52, 0.48))
+        axi = fig.add_axes((0.08, 0.09, 0.52, 0.23))
+        cbar_box = (0.615, 0.44, 0.015, 0.48)
     else:
-        axc = fig.add_axes((0.08, 0.14, 0.78, 0.72))
-        cbar_box = (0.88, 0.14, 0.02, 0.72)
+        axc = fig.add_axes((0.08, 0.44, 0.78, 0.48))
+        axi = fig.add_axes((0.08, 0.09, 0.78, 0.23))
+        cbar_box = (0.88, 0.44, 0.02, 0.48)
     if not records:
         axc.text(0.5, 0.5, "no records", ha="center", va="center", transform=axc.transAxes)
         return fig
@@ -526,8 +531,31 @@ def patch_message_figure(records, left=None, patch_box=None, title=None,
     axc.plot([], [], ":", color=cmap(0.45), label="message of an invalid patch ($w_p=0$)")
     axc.plot([], [], "--", color=cmap(0.45), label=r"patch mean of $D$")
     axc.set_xlim(float(d_ref.min()), float(d_ref.max()))
-    axc.set_xlabel("disparity d (left-view pixels)", fontsize=8)
+    axc.set_xlabel("disparity d (left-view pixels)", fontsize=8, labelpad=1)
     axc.set_ylabel("cost", fontsize=8)
+
+    # d_p +- sigma_p and <D>_p against the iteration
+    dlo, dhi = float(d_ref.min()), float(d_ref.max())
+    for it, c in records:
+        dp, sp = float(c["d_p"]), float(c["sigma_p"])
+        color = cmap(norm(it))
+        axi.plot([it, it], [max(dp - sp, dlo - 1e3), min(dp + sp, dhi + 1e3)], color=color,
+                 linewidth=1.0, alpha=0.5)
+        face = color if bool(c.get("valid", True)) else "white"
+        axi.plot([it], [dp], "o", markersize=3.5, markerfacecolor=face, markeredgecolor=color)
+    mean_ds = [(int(it), float(c["mean_D"])) for it, c in records
+               if c.get("mean_D") is not None and np.isfinite(c["mean_D"])]
+    if mean_ds:
+        axi.plot(*zip(*mean_ds), "--", color="black", linewidth=0.8,
+                 label=r"$\langle D\rangle_p$")
+    axi.plot([], [], "o-", color="0.4", markersize=3.5, linewidth=1.0,
+             label=r"$d_p \pm \sigma_p$ (hollow: invalid)")
+    axi.set_ylim(dlo, dhi)
+    axi.set_xlim(lo - 0.5 - 0.02 * (hi - lo), hi + 0.5 + 0.02 * (hi - lo))
+    axi.set_xlabel("iteration", fontsize=8, labelpad=1)
+    axi.set_ylabel("d (px)", fontsize=8)
+    axi.tick_params(labelsize=7)
+    axi.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(1.0, 1.0), frameon=False)
     axc.tick_params(labelsize=7)
     axc.legend(fontsize=6.5, loc="lower right", framealpha=0.8)
     if title:

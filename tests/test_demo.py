@@ -54,8 +54,9 @@ def test_parse_patch():
 
 
 def test_recorded_iterations_and_default_patch():
-    assert demo.recorded_iterations(20, 5) == [0, 5, 10, 15, 20]
-    assert demo.recorded_iterations(17, 5) == [0, 5, 10, 15, 17]
+    assert demo.recorded_iterations(20, 5) == [5, 10, 15, 20]
+    assert demo.recorded_iterations(17, 5) == [5, 10, 15, 17]
+    assert demo.recorded_iterations(3, 5) == [3]
     phi = -np.ones((20, 30))
     phi[5:12, 8:20] = 1.0
     assert demo.default_patch(phi, 3) == (8, 8, 1)
