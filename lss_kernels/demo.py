@@ -113,9 +113,11 @@ def recorded_iterations(n_iterations: int, every: int) -> list:
     return its
 
 
-def default_patch(phi0: np.ndarray, n_levels: int):
+def default_patch(phi0: np.ndarray, n_levels: int, patch_sizes=None):
     """The default patch of :func:`run_demo`: middle level, on the row through the centre of
-    the initial foreground (``phi > 0``, cyclopean frame), at its left boundary."""
+    the initial foreground (``phi > 0``, cyclopean frame), at its left boundary: the patch
+    lies just inside, its left edge on the boundary (given ``patch_sizes``; else centred on
+    the boundary pixel)."""
     fg = np.asarray(phi0) > 0
     level = n_levels // 2
     if not fg.any():
@@ -127,7 +129,9 @@ def default_patch(phi0: np.ndarray, n_levels: int):
     if cols.size == 0:
         y = int(rows[np.argmin(np.abs(rows - y))])
         cols = np.nonzero(fg[y])[0]
-    return int(cols.min()), y, level
+    half = int(patch_sizes[level]) // 2 if patch_sizes is not None else 0
+    x = min(int(cols.min()) + half, int(cols.max()))
+    return x, y, level
 
 
 # ---------------------------------------------------------------------------------------------
@@ -199,7 +203,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
     n_levels = len(solver.params.patch_sizes)
     phi0 = solver.result().phi          # the initial phi (cyclopean), before any step
     if patch is None:
-        patch = default_patch(phi0, n_levels)
+        patch = default_patch(phi0, n_levels, solver.params.patch_sizes)
     px, py, plevel = (int(v) for v in patch)
     h, w = phi0.shape
     if not (0 <= px < w and 0 <= py < h and 0 <= plevel < n_levels):
@@ -252,7 +256,8 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
     last_curve = curves[-1][1]
     shift = float(last_curve.get("mean_D", 0.0)) / 2.0 if np.isfinite(
         last_curve.get("mean_D", np.nan)) else 0.0
-    box = (px + shift - patch_size // 2, py - patch_size // 2, patch_size)
+    shown = max(patch_size, w // 40)     # a tiny patch on a large image: outline it larger
+    box = (px + shift - shown // 2, py - shown // 2, shown)
     fig = viz.patch_message_figure(
         curves, left=left, patch_box=box,
         title=(f"disparity message of the {patch_size}x{patch_size} patch at cyclopean "

@@ -60,6 +60,7 @@ def test_recorded_iterations_and_default_patch():
     phi = -np.ones((20, 30))
     phi[5:12, 8:20] = 1.0
     assert demo.default_patch(phi, 3) == (8, 8, 1)
+    assert demo.default_patch(phi, 3, (3, 9, 18)) == (12, 8, 1)
 
 
 @pytest.mark.parametrize("argv, match", [
