@@ -1,0 +1,378 @@
+"""Table 1 of the paper on a folder of scenes: run methods, score them, write tables and panels.
+
+``lss eval DATASET_DIR`` runs every method on every scene folder of ``DATASET_DIR``, scores each
+run with the paper's protocol (:func:`lss_kernels.metrics.score`) and writes, under ``--out``::
+
+    runs/<scene>/<method>/disparity.pfm   left-view disparity (float32 PFM)
+    runs/<scene>/<method>/occlusion.png   left-view occlusion mask (255 = occluded)
+    runs/<scene>/<method>/result.json     the score and the seconds of the run
+    results.csv                           one row per scene and method, then a mean per method
+    table.md                              occlusion F1 per scene and method beside the paper's
+    panels/<scene>.png                    left image, true and estimated disparities
+
+A run whose ``result.json`` exists is not repeated (the evaluation can be interrupted and
+resumed) unless ``force`` is set.  ``results.csv``, ``table.md`` and the panels describe the
+methods of the latest call (a panel is redrawn when one of its runs was recomputed or it is
+missing).  Methods: ``lss`` (this package's solver, initialised with the
+scene's cyclopean ellipse when it has one, the authors' own initialisation, else its left-view
+ellipse) and the OpenCV peers of :mod:`lss_kernels.baselines` (``sgm``, ``bm-lr``).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+from . import io, metrics
+from .baselines import METHODS as BASELINES, require_opencv
+
+__all__ = ["COLUMNS", "METHOD_NAMES", "add_cli", "main_eval", "run_eval"]
+
+#: Every method ``run_eval`` knows, in table order.
+METHOD_NAMES = ("lss",) + tuple(BASELINES)
+#: Columns of ``results.csv``.
+COLUMNS = ("scene", "method", "occ_f1", "occ_precision", "occ_recall", "bad4", "seconds")
+_MEANS = ("occ_f1", "occ_precision", "occ_recall", "bad4", "seconds")
+
+
+# ---------------------------------------------------------------------------------------------
+# One run (executed in a worker process, or in the caller's when jobs == 1)
+# ---------------------------------------------------------------------------------------------
+
+def _init_worker(arch: str, threads: int, methods) -> None:
+    """Per-process set-up: Taichi for the solver, OpenCV's thread count for the peers."""
+    if "lss" in methods:
+        from . import backend
+        backend.init(arch=arch, threads=threads)
+    if any(m in BASELINES for m in methods):
+        require_opencv().setNumThreads(threads)
+
+
+def _run_method(method: str, scene: io.Scene, params):
+    """Disparity and occlusion (left view) of one method on one scene, and extra facts."""
+    if method == "lss":
+        from .solver import solve
+        if scene.init_ellipse_cyclopean is not None:
+            init, frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
+        else:
+            init, frame = tuple(scene.init_ellipse), "left"
+        result = solve(scene.left, scene.right, scene.d_max, init, params=params,
+                       init_frame=frame)
+        extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason)}
+        return result.disparity, result.occlusion, extra
+    disparity, occlusion = BASELINES[method](scene.left, scene.right, scene.d_max)
+    return disparity, occlusion, {}
+
+
+def _run_one(scene_dir: str, method: str, run_dir: str, params) -> dict:
+    """Run, score and save one (scene, method); return the record written to result.json."""
+    scene = io.load_scene(scene_dir)
+    start = time.perf_counter()
+    disparity, occlusion, extra = _run_method(method, scene, params)
+    seconds = time.perf_counter() - start
+    disparity = np.asarray(disparity, dtype=np.float32)
+    occlusion = np.asarray(occlusion, dtype=bool)
+    scores = {k: _plain(v) for k, v in metrics.score(disparity, occlusion, scene).items()}
+    record = {"scene": Path(scene_dir).name, "method": method, **scores, "seconds": seconds,
+              **extra}
+    out = Path(run_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    io.write_pfm(out / "disparity.pfm", disparity)
+    io.write_mask(out / "occlusion.png", occlusion)
+    # result.json last: its presence means the run is complete.
+    tmp = out / "result.json.tmp"
+    tmp.write_text(json.dumps(record, indent=1))
+    os.replace(tmp, out / "result.json")
+    return record
+
+
+def _plain(value):
+    """numpy scalars to Python numbers, for JSON."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+# ---------------------------------------------------------------------------------------------
+# The engine
+# ---------------------------------------------------------------------------------------------
+
+def _check_methods(methods) -> tuple:
+    methods = tuple(methods)
+    valid = ", ".join(METHOD_NAMES)
+    if not methods:
+        raise ValueError(f"no method given; valid: {valid}")
+    unknown = [m for m in methods if m not in METHOD_NAMES]
+    if unknown:
+        raise ValueError(f"unknown method(s) {', '.join(map(repr, unknown))}; valid: {valid}")
+    if any(m in BASELINES for m in methods):
+        require_opencv()
+    return tuple(dict.fromkeys(methods))
+
+
+def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs: int = 1,
+             force: bool = False, arch: str = "cpu", params=None,
+             progress: bool = True) -> list:
+    """Run ``methods`` on every scene of ``dataset_dir``, score them and write the report.
+
+    Parameters
+    ----------
+    dataset_dir : str or path-like
+        A folder of scene folders (see ``data/README.md``); ``paper_table1.json`` in it, if
+        present, adds the paper's numbers to ``table.md``.
+    methods : sequence of str
+        Any of :data:`METHOD_NAMES`.
+    out : str or path-like
+        Output folder (created).
+    jobs : int
+        Worker processes ("spawn" context: Taichi is not fork-safe); each initialises Taichi
+        once with ``max(1, cpu_count // jobs)`` threads.  ``jobs=1`` runs in the calling
+        process, initialising Taichi there with ``arch`` unless it already runs on ``arch``.
+    force : bool
+        Recompute runs that already have a ``result.json``.
+    arch : str
+        Taichi arch for ``lss`` (see :func:`lss_kernels.backend.init`).
+    params : lss_kernels.Params or None
+        Solver parameters for ``lss`` (``None``: the paper's defaults).
+    progress : bool
+        Print one line per finished (scene, method) to stderr.
+
+    Returns
+    -------
+    list of dict
+        One record per (scene, method), in scene then method order: ``scene``, ``method``, the
+        keys of :func:`lss_kernels.metrics.score`, ``seconds`` (wall-clock of the method alone,
+        without loading and scoring), for ``lss`` also ``iterations`` and ``stop_reason``, and
+        ``skipped`` (True when read from an earlier run's ``result.json``).
+
+    Raises
+    ------
+    ValueError
+        Unknown method, ``jobs < 1``, or no scene folder in ``dataset_dir``.
+    FileNotFoundError
+        ``dataset_dir`` is not a folder.
+    ImportError
+        One line, when a requested peer needs OpenCV and it is missing.
+    """
+    methods = _check_methods(methods)
+    if not isinstance(jobs, int) or jobs < 1:
+        raise ValueError(f"jobs: expected an integer >= 1, got {jobs!r}")
+    scene_dirs = [Path(p) for p in io.list_scenes(dataset_dir)]
+    out = Path(out)
+    names = [p.name for p in scene_dirs]
+
+    records, todo = {}, []
+    for scene_dir in scene_dirs:
+        for method in methods:
+            run_dir = out / "runs" / scene_dir.name / method
+            done = run_dir / "result.json"
+            if done.exists() and not force:
+                records[scene_dir.name, method] = {**json.loads(done.read_text()),
+                                                   "skipped": True}
+            else:
+                todo.append((os.fspath(scene_dir), method, os.fspath(run_dir), params))
+
+    total = len(names) * len(methods)
+    log = _Progress(total, enabled=progress)
+    for record in records.values():
+        log.done(record)
+    fresh = {}
+    for record in _execute(todo, methods, jobs, arch):
+        record["skipped"] = False
+        fresh[record["scene"], record["method"]] = record
+        log.done(record)
+    records.update(fresh)
+
+    rows = [records[n, m] for n in names for m in methods]
+    _write_csv(out / "results.csv", rows, methods)
+    _write_table(out / "table.md", rows, names, methods, Path(dataset_dir))
+    for scene_dir in scene_dirs:
+        panel = out / "panels" / f"{scene_dir.name}.png"
+        if any((scene_dir.name, m) in fresh for m in methods) or not panel.exists():
+            _write_panel(panel, scene_dir, [records[scene_dir.name, m] for m in methods], out)
+    return rows
+
+
+def _execute(todo, methods, jobs: int, arch: str):
+    """Yield the records of the runs in ``todo`` as they finish."""
+    if not todo:
+        return
+    if jobs == 1:
+        if "lss" in methods:
+            from . import backend
+            if backend.current_arch() != arch:
+                backend.init(arch=arch)
+        for task in todo:
+            yield _run_one(*task)
+        return
+    threads = max(1, (os.cpu_count() or 1) // jobs)
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn"),
+                               initializer=_init_worker, initargs=(arch, threads, methods))
+    try:
+        futures = [pool.submit(_run_one, *task) for task in todo]
+        for future in as_completed(futures):
+            yield future.result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+class _Progress:
+    """One line per finished (scene, method): running count, scores and seconds."""
+
+    def __init__(self, total: int, enabled: bool):
+        self.total, self.count, self.enabled = total, 0, enabled
+
+    def done(self, record: dict) -> None:
+        self.count += 1
+        if not self.enabled:
+            return
+        how = "cached" if record["skipped"] else f"{record['seconds']:.1f} s"
+        print(f"[{self.count}/{self.total}] {record['scene']} {record['method']}: "
+              f"F1 {record['occ_f1']:.2f}, bad-4.0 {record['bad4']:.1f} % ({how})",
+              file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# Reports
+# ---------------------------------------------------------------------------------------------
+
+def _means(rows, method: str) -> dict:
+    mine = [r for r in rows if r["method"] == method]
+    return {k: float(np.mean([r[k] for r in mine])) for k in _MEANS}
+
+
+def _write_csv(path: Path, rows, methods) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(COLUMNS)
+        for row in rows:
+            writer.writerow([row["scene"], row["method"]]
+                            + [f"{row[k]:.6g}" for k in COLUMNS[2:]])
+        for method in methods:
+            mean = _means(rows, method)
+            writer.writerow(["mean", method] + [f"{mean[k]:.6g}" for k in COLUMNS[2:]])
+
+
+def _paper_label(key: str) -> str:
+    return key if "paper" in key else f"{key} (paper)"
+
+
+def _write_table(path: Path, rows, names, methods, dataset_dir: Path) -> None:
+    """Markdown table: rows = scenes, columns = occlusion F1 per method, then the paper's."""
+    paper_file = dataset_dir / "paper_table1.json"
+    paper = json.loads(paper_file.read_text()) if paper_file.exists() else {}
+    numbers = {}
+    for name in names:
+        meta_file = dataset_dir / name / "meta.json"
+        meta = json.loads(meta_file.read_text()) if meta_file.exists() else {}
+        numbers[name] = meta.get("paper_scene")
+    by_key = {(r["scene"], r["method"]): r for r in rows}
+    fmt = lambda v, spec: "–" if v is None else format(v, spec)
+
+    def paper_f1(key, name):
+        n = numbers[name]
+        table = paper[key]["occ_f1"]
+        return table[n - 1] if n is not None and 1 <= n <= len(table) else None
+
+    header = ["scene"] + list(methods) + [_paper_label(k) for k in paper]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for name in names:
+        label = name if numbers[name] is None else f"{numbers[name]}: {name}"
+        cells = [fmt(by_key[name, m]["occ_f1"], ".2f") for m in methods]
+        cells += [fmt(paper_f1(k, name), ".2f") for k in paper]
+        lines.append("| " + " | ".join([label] + cells) + " |")
+    means = {m: _means(rows, m) for m in methods}
+    paper_means = []
+    for key in paper:
+        values = [v for v in (paper_f1(key, n) for n in names) if v is not None]
+        paper_means.append(float(np.mean(values)) if values else None)
+    lines.append("| **mean F1** | " + " | ".join(
+        [fmt(means[m]["occ_f1"], ".2f") for m in methods]
+        + [fmt(v, ".2f") for v in paper_means]) + " |")
+    lines.append("| **mean bad-4.0 (%)** | " + " | ".join(
+        [fmt(means[m]["bad4"], ".2f") for m in methods]
+        + [fmt(paper[k].get("avg_bad4"), ".2f") for k in paper]) + " |")
+    lines.append("| **seconds per scene** | " + " | ".join(
+        [fmt(means[m]["seconds"], ".2f") for m in methods] + ["–"] * len(paper)) + " |")
+    text = [f"# Occlusion F1 on {dataset_dir.name} ({len(names)} scenes)", ""] + lines
+    if paper:
+        text += ["", "Paper columns: Table 1 of the paper; their mean F1 is over the scenes "
+                 "above, their mean bad-4.0 is the paper's own average over its 15 scenes."]
+    path.write_text("\n".join(text) + "\n")
+
+
+def _write_panel(path: Path, scene_dir: Path, records, out: Path) -> None:
+    """Left image, true disparity and each method's disparity with occlusions in dark blue."""
+    from . import viz
+    scene = io.load_scene(scene_dir)
+    truth = np.asarray(scene.disp_left, dtype=np.float32)
+    finite = truth[np.isfinite(truth)]
+    vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    vmax = max(vmax, vmin + 1.0)
+    h, w = truth.shape
+    tiles = [(scene.left, "left image"),
+             (viz.occlusion_disparity_rgb(truth, scene.occ_left, vmin, vmax), "ground truth")]
+    for record in records:
+        run = out / "runs" / scene_dir.name / record["method"]
+        disparity = io.read_pfm(run / "disparity.pfm")
+        occlusion = io.read_mask(run / "occlusion.png")
+        tiles.append((viz.occlusion_disparity_rgb(disparity, occlusion, vmin, vmax),
+                      f"{record['method']}: F1 {record['occ_f1']:.2f}, "
+                      f"bad-4.0 {record['bad4']:.1f} %"))
+    tile_w = 320
+    tile_h = max(1, round(tile_w * h / w))
+    fig = viz.new_figure(tile_w * len(tiles), tile_h + 28)
+    for i, (rgb, title) in enumerate(tiles):
+        ax = fig.add_axes((i / len(tiles), 0, 1 / len(tiles), tile_h / (tile_h + 28)))
+        ax.imshow(rgb, interpolation="nearest", aspect="auto")
+        ax.set_axis_off()
+        ax.set_title(title, fontsize=8)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    viz.save_figure(fig, path)
+
+
+# ---------------------------------------------------------------------------------------------
+# Command line
+# ---------------------------------------------------------------------------------------------
+
+def add_cli(subparsers) -> None:
+    """Register ``eval`` on an ``argparse`` sub-parsers object (handler: :func:`main_eval`)."""
+    from .backend import ARCHES
+    p = subparsers.add_parser(
+        "eval", help="run and score methods on a folder of scenes (the paper's Table 1)",
+        description="Run each method on every scene folder of DATASET_DIR, score it with the "
+                    "paper's protocol and write results.csv, table.md and panels/ to --out. "
+                    "Finished runs are reused unless --force.")
+    p.add_argument("dataset_dir", metavar="DATASET_DIR", help="folder of scene folders")
+    p.add_argument("--methods", default=",".join(METHOD_NAMES),
+                   help=f"comma-separated, any of {', '.join(METHOD_NAMES)} "
+                        "(default: %(default)s)")
+    p.add_argument("--out", default="eval_out", help="output folder (default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=1, help="worker processes (default: 1)")
+    p.add_argument("--force", action="store_true", help="recompute finished runs")
+    p.add_argument("--arch", default="cpu", choices=ARCHES,
+                   help="Taichi arch for lss (default: %(default)s)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(func=main_eval)
+
+
+def main_eval(args) -> int:
+    """Handler of ``lss eval``: 0 on success, 2 with a one-line message on a usage error
+    (unknown method, missing OpenCV, no such folder, no scenes)."""
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    try:
+        rows = run_eval(args.dataset_dir, methods=methods, out=args.out, jobs=args.jobs,
+                        force=args.force, arch=args.arch, progress=not args.quiet)
+    except (ValueError, FileNotFoundError, ImportError) as error:
+        print(f"lss eval: error: {error}", file=sys.stderr)
+        return 2
+    if not args.quiet:
+        print(Path(args.out, "table.md").read_text(), end="")
+        print(f"{len(rows)} runs; results in {args.out}", file=sys.stderr)
+    return 0
