@@ -26,9 +26,16 @@ __all__ = ["LevelSet", "median_network"]
 
 
 def median_network(n):
-    """Comparators of Batcher's odd-even merge sort over the next power of two >= n, and the
-    padding that makes one output the median: returns ``(pairs, size, n_low, index)``; pad
-    with ``n_low`` copies of -inf and ``size - n - n_low`` of +inf, sort, read ``index``."""
+    """A selection network for the median of ``n`` values.
+
+    Batcher's odd-even merge sort over the next power of two ``size >= n``, with ``n_low``
+    copies of -inf and ``size - n - n_low`` of +inf as padding so that sorted position
+    ``index`` holds the median; then pruned: comparators whose inputs are known padding do
+    nothing, and comparators that cannot reach ``index`` are dropped.  Returns
+    ``(ops, size, n_low, index, pairs)``: ``ops`` lists ``(a, b, keep_min, keep_max)`` (position
+    ``a`` receives the minimum, ``b`` the maximum, each only if still needed) and ``pairs`` is
+    the unpruned sorting network (for tests).
+    """
     size = 1
     while size < n:
         size *= 2
@@ -53,7 +60,26 @@ def median_network(n):
 
     sort(0, size)
     n_low = (size - n) // 2
-    return pairs, size, n_low, n_low + (n - 1) // 2
+    index = n_low + (n - 1) // 2
+    # symbolic pass: padding positions are known constants
+    kind = ["lo"] * n_low + ["var"] * n + ["hi"] * (size - n - n_low)
+    live = []
+    for a, b in pairs:
+        if kind[a] == "lo" or kind[b] == "hi":
+            continue                      # already in order
+        if kind[a] == "hi" or kind[b] == "lo":
+            raise AssertionError("a sorting network never moves padding inwards")
+        live.append((a, b))
+    # backward pass: keep what the median depends on
+    needed = {index}
+    ops = []
+    for a, b in reversed(live):
+        keep_min, keep_max = a in needed, b in needed
+        if keep_min or keep_max:
+            ops.append((a, b, keep_min, keep_max))
+            needed |= {a, b}
+    ops.reverse()
+    return ops, size, n_low, index, pairs
 
 
 @ti.data_oriented
@@ -72,11 +98,12 @@ class LevelSet:
         self.b_map, self.b_x, self.b_y = f(), f(), f()
         self._t0, self._t1, self._t2 = f(), f(), f()
         self.flipped = pool.field(ti.i32, ())
+        self.changed = pool.field(ti.i32, ())
+        self.reference_sign = pool.field(ti.i8, (H, W))
         self.area = pool.field(ti.i32, ())
         g, g1, g2 = gaussian_taps(params.curvature_sigma)
         self.half = (len(g) - 1) // 2
-        self.taps = pool.field(ti.f32, (3, len(g)))
-        self._taps = np.stack([g, g1, g2]).astype(np.float32)
+        self.tap_values = np.stack([g, g1, g2]).astype(np.float32).tolist()
         self.curvature_clip = float(params.curvature_clip)
         self.boundary_clip = float(params.boundary_clip)
         self.median_size = int(params.median_size)
@@ -85,8 +112,7 @@ class LevelSet:
         self._edt = None
 
     def setup(self):
-        """Fill constant fields; call once the pool is finalised."""
-        self.taps.from_numpy(self._taps)
+        """Allocate the re-initialisation scratch; call once the pool is finalised."""
         self._edt = DistanceTransform((self.H, self.W, 1))
 
     def destroy(self):
@@ -105,28 +131,53 @@ class LevelSet:
             j = 2 * n - j - 1
         return ti.min(ti.max(j, 0), n - 1)
 
-    @ti.kernel
-    def _conv_x(self, src: ti.template(), dst: ti.template(), order: ti.i32):
-        for y, x in dst:
-            s = 0.0
-            for i in range(-self.half, self.half + 1):
-                s += self.taps[order, i + self.half] * src[y, self._reflect(x - i, self.W)]
-            dst[y, x] = s
+    @ti.func
+    def _conv(self, src: ti.template(), y, x, axis: ti.template(), order: ti.template()):
+        """Convolution of ``src`` along ``axis`` with the Gaussian derivative of ``order``
+        at (y, x); the taps are compile-time constants."""
+        s = 0.0
+        for i in ti.static(range(-self.half, self.half + 1)):
+            w = ti.static(float(self.tap_values[order][i + self.half]))
+            if ti.static(axis == 1):
+                s += w * src[y, self._reflect(x - i, self.W)]
+            else:
+                s += w * src[self._reflect(y - i, self.H), x]
+        return s
 
     @ti.kernel
-    def _conv_y(self, src: ti.template(), dst: ti.template(), order: ti.i32):
-        for y, x in dst:
-            s = 0.0
-            for i in range(-self.half, self.half + 1):
-                s += self.taps[order, i + self.half] * src[self._reflect(y - i, self.H), x]
-            dst[y, x] = s
+    def _rows3(self, src: ti.template()):
+        """Along x: orders 0, 1, 2 of src into the three scratch fields."""
+        for y, x in src:
+            self._t0[y, x] = self._conv(src, y, x, 1, 0)
+            self._t1[y, x] = self._conv(src, y, x, 1, 1)
+            self._t2[y, x] = self._conv(src, y, x, 1, 2)
+
+    @ti.kernel
+    def _columns5(self):
+        """Along y: the five derivatives of phi from the row-filtered scratch fields."""
+        for y, x in self.phi:
+            self.phi_x[y, x] = self._conv(self._t1, y, x, 0, 0)
+            self.phi_y[y, x] = self._conv(self._t0, y, x, 0, 1)
+            self.phi_xx[y, x] = self._conv(self._t2, y, x, 0, 0)
+            self.phi_yy[y, x] = self._conv(self._t0, y, x, 0, 2)
+            self.phi_xy[y, x] = self._conv(self._t1, y, x, 0, 1)
+
+    @ti.kernel
+    def _rows2(self, src: ti.template()):
+        for y, x in src:
+            self._t0[y, x] = self._conv(src, y, x, 1, 0)
+            self._t1[y, x] = self._conv(src, y, x, 1, 1)
+
+    @ti.kernel
+    def _columns2(self, gx: ti.template(), gy: ti.template()):
+        for y, x in gx:
+            gx[y, x] = self._conv(self._t1, y, x, 0, 0)
+            gy[y, x] = self._conv(self._t0, y, x, 0, 1)
 
     def gradient(self, src, gx, gy):
         """Gaussian-derivative gradient of an ``(H, W)`` field."""
-        self._conv_x(src, self._t0, 1)
-        self._conv_y(self._t0, gx, 0)
-        self._conv_x(src, self._t0, 0)
-        self._conv_y(self._t0, gy, 1)
+        self._rows2(src)
+        self._columns2(gx, gy)
 
     @ti.kernel
     def _curvature(self):
@@ -143,14 +194,8 @@ class LevelSet:
 
     def derivatives(self):
         """phi_x, phi_y, kappa and N from the current phi."""
-        self._conv_x(self.phi, self._t0, 0)
-        self._conv_x(self.phi, self._t1, 1)
-        self._conv_x(self.phi, self._t2, 2)
-        self._conv_y(self._t1, self.phi_x, 0)
-        self._conv_y(self._t0, self.phi_y, 1)
-        self._conv_y(self._t2, self.phi_xx, 0)
-        self._conv_y(self._t0, self.phi_yy, 2)
-        self._conv_y(self._t1, self.phi_xy, 1)
+        self._rows3(self.phi)
+        self._columns5()
         self._curvature()
 
     # ---------------------------------------------------------------- boundary weight
@@ -200,7 +245,7 @@ class LevelSet:
     # ---------------------------------------------------------------- median, re-init
     @ti.kernel
     def _median(self, src: ti.template(), dst: ti.template(), k: ti.template(),
-                pairs: ti.template(), size: ti.template(), n_low: ti.template(),
+                ops: ti.template(), size: ti.template(), n_low: ti.template(),
                 index: ti.template()):
         for y, x in dst:
             v = ti.Vector.zero(ti.f32, size)
@@ -213,11 +258,13 @@ class LevelSet:
                     dy = ti.static((i - n_low) // k - k // 2)
                     dx = ti.static((i - n_low) % k - k // 2)
                     v[i] = src[self._reflect(y + dy, self.H), self._reflect(x + dx, self.W)]
-            for a, b in ti.static(pairs):
+            for a, b, keep_min, keep_max in ti.static(ops):
                 lo = ti.min(v[a], v[b])
                 hi = ti.max(v[a], v[b])
-                v[a] = lo
-                v[b] = hi
+                if ti.static(keep_min):
+                    v[a] = lo
+                if ti.static(keep_max):
+                    v[b] = hi
             dst[y, x] = v[index]
 
     @ti.kernel
@@ -256,8 +303,8 @@ class LevelSet:
         if k == 1:
             self._copy(src, dst)
             return
-        pairs, size, n_low, index = median_network(k * k)
-        self._median(src, dst, k, tuple(pairs), size, n_low, index)
+        ops, size, n_low, index, _ = median_network(k * k)
+        self._median(src, dst, k, tuple(ops), size, n_low, index)
 
     @ti.kernel
     def _count_flips(self, before: ti.template()):
@@ -269,6 +316,17 @@ class LevelSet:
                 self.flipped[None] += 1
             if now:
                 self.area[None] += 1
+
+    @ti.kernel
+    def net_change(self):
+        """Pixels whose label differs from the reference taken at the last call (the net
+        change over a window: an oscillating boundary does not count); renews the reference."""
+        self.changed[None] = 0
+        for y, x in self.phi:
+            now = ti.cast(self.phi[y, x] > 0, ti.i8)
+            if now != self.reference_sign[y, x]:
+                self.changed[None] += 1
+            self.reference_sign[y, x] = now
 
     def evolve(self, cost, c_max, shapes, occ, params, reinit):
         """One descent step of Eq. 2, then (every ``reinit_every``) the signed-distance

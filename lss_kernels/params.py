@@ -43,8 +43,9 @@ class Params:
     stop_window : int
         The stopping rule looks at the foreground changes over this many iterations.
     stop_fraction : float
-        Stop when the fraction of pixels whose foreground label flipped during the last
-        ``stop_window`` iterations, relative to the foreground area, is below this.
+        Every ``stop_window`` iterations, the pixels whose foreground label differs from
+        ``stop_window`` iterations before are counted; stop when they are fewer than this
+        fraction of the foreground area (an oscillating boundary does not count).
         0 disables the rule (run to ``max_iterations``).
     phi_scale : float
         phi is a signed distance (in pixels) times this factor (the release: 0.01).

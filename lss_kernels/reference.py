@@ -8,6 +8,8 @@ import numpy as np
 
 __all__ = [
     "matching_cost", "box_mean", "box_sum", "patch_costs", "patch_messages", "consensus",
+    "upward_extremes", "median_filter", "gaussian_derivatives", "curvature", "delta_theta",
+    "interp_row", "interp_volume", "levelset_step",
 ]
 
 
@@ -78,3 +80,106 @@ def consensus(d_p, sigma_p, valid, sizes):
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(a > 0, b / a, 0.0)
     return a, mean
+
+
+def upward_extremes(a, size, reduce):
+    """Max (``reduce=np.max``) or min of ``a`` over each centred patch (in-image pixels)."""
+    H, W = a.shape
+    h = size // 2
+    out = np.empty((H, W), np.float64)
+    for y in range(H):
+        for x in range(W):
+            out[y, x] = reduce(a[max(0, y - h):max(0, y - h + size),
+                                 max(0, x - h):max(0, x - h + size)])
+    return out
+
+
+def median_filter(a, size):
+    """Median over ``size x size`` windows with symmetric (mirror, edge repeated) borders."""
+    h = size // 2
+    p = np.pad(a, h, mode="symmetric")
+    win = np.lib.stride_tricks.sliding_window_view(p, (size, size))
+    return np.median(win, axis=(2, 3))
+
+
+def gaussian_derivatives(phi, sigma):
+    """phi_x, phi_y, phi_xx, phi_yy, phi_xy by separable Gaussian-derivative convolution
+    (half-width ceil(3.5 sigma), symmetric borders)."""
+    from .costs import gaussian_taps
+    g = gaussian_taps(sigma)
+    h = (len(g[0]) - 1) // 2
+
+    def conv(a, taps, axis):
+        p = np.pad(a, [(h, h) if ax == axis else (0, 0) for ax in range(2)], mode="symmetric")
+        out = np.zeros_like(a, dtype=np.float64)
+        n = a.shape[axis]
+        for i in range(-h, h + 1):
+            sl = [slice(None)] * 2
+            sl[axis] = slice(h - i, h - i + n)
+            out += taps[i + h] * p[tuple(sl)]
+        return out
+
+    cx = [conv(phi, t, 1) for t in g]
+    return (conv(cx[1], g[0], 0), conv(cx[0], g[1], 0), conv(cx[2], g[0], 0),
+            conv(cx[0], g[2], 0), conv(cx[1], g[1], 0))
+
+
+def curvature(phi, sigma, clip):
+    """kappa = div(grad phi / |grad phi|) (clipped) and the unit normal (N_x, N_y)."""
+    px, py, pxx, pyy, pxy = gaussian_derivatives(phi, sigma)
+    norm = np.sqrt(px ** 2 + py ** 2) + 1e-10
+    k = (pxx * py ** 2 - 2 * px * py * pxy + pyy * px ** 2) / norm ** 3
+    return np.clip(k, -clip, clip), px / norm, py / norm
+
+
+def delta_theta(theta1, theta2, phi_x, steps=6, c_cap=None):
+    """The ray cast of Sec. 2 for callables ``theta1(x, y)``, ``theta2(x, y)`` (vectorised over
+    arrays) on the grid of ``phi_x``: solves t = Theta_1(x) - Theta_2(x - s t) by fixed-point
+    iteration; returns s t (0 where Theta_1 <= Theta_2 or phi_x = 0)."""
+    H, W = phi_x.shape
+    y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+    s = np.sign(phi_x)
+    t1 = theta1(x, y)
+    jump = t1 - theta2(x, y)
+    t = jump.copy()
+    for _ in range(steps):
+        t = np.clip(t1 - theta2(x - s * t, y), 0, np.inf if c_cap is None else c_cap)
+    return np.where((jump > 0) & (s != 0), s * t, 0.0)
+
+
+def interp_row(a, x):
+    """Linear interpolation of each row of ``a`` at real positions ``x`` (same shape), clamped."""
+    H, W = a.shape
+    xf = np.clip(x, 0, W - 1)
+    x0 = np.minimum(np.floor(xf).astype(int), W - 2)
+    t = xf - x0
+    rows = np.arange(H)[:, None]
+    return (1 - t) * a[rows, x0] + t * a[rows, x0 + 1]
+
+
+def interp_volume(vol, x, c):
+    """vol[y, x, c - 1] at real x and c (bilinear, clamped), ``x`` and ``c`` of shape (H, W)."""
+    H, W, C = vol.shape
+    xf = np.clip(x, 0, W - 1)
+    x0 = np.minimum(np.floor(xf).astype(int), W - 2)
+    tx = xf - x0
+    kf = np.clip(c - 1.0, 0, C - 1)
+    k0 = np.minimum(np.floor(kf).astype(int), C - 2)
+    tk = kf - k0
+    y = np.arange(H)[:, None]
+    at = lambda xx, kk: vol[y, xx, kk]
+    a = (1 - tk) * at(x0, k0) + tk * at(x0, k0 + 1)
+    b = (1 - tk) * at(x0 + 1, k0) + tk * at(x0 + 1, k0 + 1)
+    return (1 - tx) * a + tx * b
+
+
+def levelset_step(phi, cost1, theta1_map, theta2_map, dtheta, b_map, b_x, b_y, kappa, n_x,
+                  n_y, dt, mu, clip):
+    """Eq. 2: phi + dt delta(phi) [-M(x, Theta_1) + M(x - delta_theta, Theta_2)
+    + mu clip(B kappa + N . grad B)], with delta(phi) = (1/pi) / (1 + phi^2)."""
+    H, W = phi.shape
+    x = np.broadcast_to(np.arange(W, dtype=np.float64), (H, W))
+    m1 = interp_volume(cost1, x, theta1_map)
+    m2 = interp_volume(cost1, x - dtheta, theta2_map)
+    bt = np.clip(b_map * kappa + n_x * b_x + n_y * b_y, -clip, clip)
+    return phi + dt * (1 / np.pi) / (1 + phi ** 2) * (-m1 + m2 + mu * bt)

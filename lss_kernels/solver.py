@@ -17,7 +17,6 @@ The host reads two integers per iteration (flipped pixels and foreground area) f
 rule; nothing else leaves the device inside the loop.
 """
 import time
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -148,7 +147,8 @@ class Solver:
         self.done = False
         self.stop_reason = None
         self.history = []
-        self._flips = deque(maxlen=self.params.stop_window)
+        self._moving = 1.0
+        self.levelset.net_change()
         self._t_loop = 0.0
         self.timings["setup_total"] = time.perf_counter() - t_start
 
@@ -249,8 +249,10 @@ class Solver:
         area = int(ls.area[None])
         seconds = time.perf_counter() - t_iter
         self._t_loop += seconds
-        self._flips.append(flipped)
-        moving = sum(self._flips) / max(area, 1)
+        if self.iteration % p.stop_window == 0:
+            ls.net_change()
+            self._moving = int(ls.changed[None]) / max(area, 1)
+        moving = self._moving
         stats = dict(iteration=self.iteration, flipped=flipped, moving_fraction=moving,
                      fg_fraction=area / float(self.H * self.W), seconds=seconds)
         self.history.append(stats)
@@ -263,10 +265,10 @@ class Solver:
             self.stop_reason = f"foreground vanished at iteration {self.iteration}"
         elif area == self.H * self.W:
             self.stop_reason = f"foreground filled the image at iteration {self.iteration}"
-        elif (p.stop_fraction > 0 and self.iteration >= max(p.min_iterations, p.stop_window)
-              and moving < p.stop_fraction):
-            self.stop_reason = (f"converged at iteration {self.iteration}: "
-                                f"{moving:.4f} of the foreground flipped in the last "
+        elif (p.stop_fraction > 0 and self.iteration >= p.min_iterations
+              and self.iteration % p.stop_window == 0 and moving < p.stop_fraction):
+            self.stop_reason = (f"converged at iteration {self.iteration}: the foreground "
+                                f"changed by {moving:.4f} of its area over the last "
                                 f"{p.stop_window} iterations (< {p.stop_fraction})")
         elif self.iteration >= p.max_iterations:
             self.stop_reason = f"reached the iteration cap ({p.max_iterations})"

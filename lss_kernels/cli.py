@@ -1,0 +1,229 @@
+"""``lss``: the command line.
+
+``lss solve``   one stereo pair or scene folder -> left-view disparity, occlusion, foreground
+``lss demo``    watch the cooperative dynamics (paper Fig. 1)
+``lss eval``    Table 1 of the paper on a dataset, with classical peers
+``lss bench``   stage-by-stage timings and scaling
+
+Errors on the command line are one line on stderr and exit status 2; nothing half-written is
+left in ``--out`` (results are written to a temporary folder that is moved into place).
+"""
+import argparse
+import importlib
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+
+from . import __version__
+from .backend import ARCHES
+
+__all__ = ["main"]
+
+SUBCOMMAND_MODULES = ("demo", "evaluate")
+
+
+class CliError(Exception):
+    """A one-line error for the user."""
+
+
+def _add_solve(subparsers):
+    p = subparsers.add_parser(
+        "solve", help="solve one pair or scene folder",
+        description="Two-layer level-set stereo on a rectified pair (left image = reference). "
+                    "Writes disparity.pfm, occlusion.png, foreground.png, disparity.png, "
+                    "overlay.png and summary.json into --out.")
+    p.add_argument("images", nargs="*", metavar="LEFT RIGHT", help="left and right images")
+    p.add_argument("--scene", metavar="DIR", help="scene folder (reads d_max and init_ellipse "
+                   "from meta.json)")
+    p.add_argument("--dmax", type=float, metavar="N", help="largest disparity, left-view px")
+    p.add_argument("--init", metavar="SPEC", help="ellipse:CX,CY,RX,RY (left-view pixels) or "
+                   "mask:PATH (8-bit PNG, 255 = foreground)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--arch", default="cpu", metavar="ARCH",
+                   help=f"Taichi backend: {', '.join(ARCHES)} (default cpu)")
+    p.add_argument("--threads", type=int, metavar="N", help="CPU threads (default: all)")
+    p.add_argument("--max-iterations", type=int, metavar="N", help="iteration cap")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a solver parameter (repeatable), e.g. --param mu=3")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=main_solve)
+
+
+def _params(args):
+    from .params import Params
+    defaults = Params()
+    changes = {}
+    for item in args.param:
+        name, sep, value = item.partition("=")
+        if not sep or not hasattr(defaults, name):
+            raise CliError(f"--param: expected NAME=VALUE with a parameter of Params, "
+                           f"got {item!r}")
+        current = getattr(defaults, name)
+        try:
+            if isinstance(current, tuple):
+                changes[name] = tuple(int(v) for v in value.split(","))
+            elif isinstance(current, int) and not isinstance(current, bool):
+                changes[name] = int(value)
+            else:
+                changes[name] = float(value)
+        except ValueError:
+            raise CliError(f"--param {name}: expected a {type(current).__name__}, "
+                           f"got {value!r}") from None
+    if args.max_iterations is not None:
+        changes["max_iterations"] = args.max_iterations
+    return defaults.replace(**changes) if changes else defaults
+
+
+def _inputs(args):
+    """(left, right, d_max, init, init_frame, scene) from the solve/demo arguments."""
+    from .validate import parse_init
+    if args.scene and args.images:
+        raise CliError("give either --scene DIR or LEFT RIGHT, not both")
+    if args.scene:
+        from .io import load_scene
+        scene = load_scene(args.scene)
+        d_max = args.dmax if args.dmax is not None else scene.d_max
+        if args.init:
+            return scene.left, scene.right, d_max, parse_init(args.init), "left", scene
+        if scene.init_ellipse_cyclopean is not None:
+            return (scene.left, scene.right, d_max, scene.init_ellipse_cyclopean, "cyclopean",
+                    scene)
+        return scene.left, scene.right, d_max, scene.init_ellipse, "left", scene
+    if len(args.images) != 2:
+        raise CliError(f"expected LEFT RIGHT (two images) or --scene DIR, got "
+                       f"{len(args.images)} image argument(s)")
+    if args.dmax is None:
+        raise CliError("--dmax: required with LEFT RIGHT")
+    if args.init is None:
+        raise CliError("--init: required with LEFT RIGHT (ellipse:CX,CY,RX,RY or mask:PATH)")
+    return args.images[0], args.images[1], args.dmax, parse_init(args.init), "left", None
+
+
+class Progress:
+    """A progress bar (rich) with the iteration, the moving fraction and s/iteration."""
+
+    def __init__(self, total, quiet):
+        self.quiet = quiet
+        self.bar = None
+        if quiet:
+            return
+        from rich.progress import BarColumn, Progress as RichProgress, TextColumn, \
+            TimeElapsedColumn
+        self.bar = RichProgress(TextColumn("[bold]lss[/] it {task.completed}/{task.total}"),
+                                BarColumn(), TextColumn("{task.fields[info]}"),
+                                TimeElapsedColumn(), transient=False)
+        self.task = self.bar.add_task("solve", total=total, info="")
+        self.bar.start()
+
+    def __call__(self, solver, stats):
+        if self.bar is not None:
+            self.bar.update(self.task, completed=stats["iteration"],
+                            info=f"moving {stats['moving_fraction']:.4f}  "
+                                 f"{stats['seconds']:.3f} s/it")
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.stop()
+
+
+def write_outputs(out_dir, result, left, params, extra=None):
+    """Write the result files into ``out_dir`` atomically (temporary folder, then rename)."""
+    import numpy as np
+    from . import io, viz
+    parent = os.path.dirname(os.path.abspath(out_dir)) or "."
+    os.makedirs(parent, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix=".lss-", dir=parent)
+    try:
+        io.write_pfm(os.path.join(tmp, "disparity.pfm"), result.disparity)
+        io.write_mask(os.path.join(tmp, "occlusion.png"), result.occlusion)
+        io.write_mask(os.path.join(tmp, "foreground.png"), result.foreground)
+        viz.save_disparity_png(os.path.join(tmp, "disparity.png"), result.disparity,
+                               vmin=0.0, occlusion=result.occlusion)
+        viz.save_overlay_png(os.path.join(tmp, "overlay.png"), left, result.foreground,
+                             result.occlusion)
+        summary = dict(iterations=result.iterations, stop_reason=result.stop_reason,
+                       seconds=round(result.timings.get("total", 0.0), 3),
+                       timings={k: round(v, 4) for k, v in result.timings.items()},
+                       theta_fg=np.round(result.theta_fg, 10).tolist(),
+                       theta_bg=np.round(result.theta_bg, 10).tolist(),
+                       theta_basis="left-view disparity over {x^2, xy, y^2, x, y, 1}, raw "
+                                   "cyclopean pixel coordinates",
+                       params=params.to_dict())
+        summary.update(extra or {})
+        with open(os.path.join(tmp, "summary.json"), "w") as f:
+            json.dump(summary, f, indent=1)
+        if os.path.isdir(out_dir):
+            shutil.rmtree(out_dir)
+        os.replace(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return summary
+
+
+def main_solve(args):
+    from . import backend
+    from .solver import Solver
+    params = _params(args)
+    left, right, d_max, init, init_frame, scene = _inputs(args)
+    backend.init(arch=args.arch, threads=args.threads)
+    t0 = time.perf_counter()
+    solver = Solver(left, right, d_max, init, params=params, init_frame=init_frame)
+    progress = Progress(params.max_iterations, args.quiet)
+    try:
+        result = solver.run(progress)
+    finally:
+        progress.close()
+    left_img = solver.left_image
+    solver.close()
+    extra = {"wall_seconds": round(time.perf_counter() - t0, 3), "d_max": float(d_max),
+             "arch": args.arch}
+    if scene is not None and scene.disp_left is not None and scene.occ_left is not None:
+        from .metrics import score
+        extra["score"] = {k: (float(v) if hasattr(v, "__float__") else v)
+                          for k, v in score(result.disparity, result.occlusion, scene).items()}
+    summary = write_outputs(args.out, result, left_img, params, extra)
+    if not args.quiet:
+        line = (f"lss solve: {result.iterations} iterations ({result.stop_reason}), "
+                f"{summary['wall_seconds']} s -> {args.out}")
+        if "score" in extra:
+            line += (f"  occlusion F1 {extra['score']['occ_f1']:.3f}, "
+                     f"bad-4.0 {extra['score']['bad4']:.2f}%")
+        print(line)
+    return 0
+
+
+def build_parser():
+    parser = argparse.ArgumentParser(
+        prog="lss", description="Two-layer level-set stereo with exact occlusion geometry "
+                                "(Wang & Zickler), as data-parallel Taichi kernels.")
+    parser.add_argument("--version", action="version", version=f"lss_kernels {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    _add_solve(sub)
+    for name in SUBCOMMAND_MODULES:
+        module = importlib.import_module(f"lss_kernels.{name}")
+        module.add_cli(sub)
+    return parser
+
+
+def main(argv=None):
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except (CliError, ValueError, FileNotFoundError, ImportError, TypeError) as exc:
+        print(f"lss {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"lss {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

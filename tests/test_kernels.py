@@ -1,0 +1,281 @@
+"""Each kernel against its small, readable numpy reference (lss_kernels.reference)."""
+import numpy as np
+import pytest
+import taichi as ti
+
+from lss_kernels import reference as ref
+from lss_kernels.backend import FieldPool
+from lss_kernels.params import Params
+
+H, W, C = 22, 34, 7
+SIZES = (3, 9, 18)
+
+
+def _field(pool_arrays):
+    """Allocate and fill (H, W) f32 fields from numpy arrays."""
+    pool = FieldPool()
+    fields = [pool.field(ti.f32, a.shape) for a in pool_arrays]
+    pool.finalize()
+    for f, a in zip(fields, pool_arrays):
+        f.from_numpy(a.astype(np.float32))
+    return pool, fields
+
+
+@pytest.fixture(scope="module")
+def pair(ti_arch):
+    rng = np.random.default_rng(3)
+    left = rng.random((H, W, 3)).astype(np.float32)
+    right = rng.random((H, W, 3)).astype(np.float32)
+    return left, right
+
+
+@pytest.fixture(scope="module")
+def hierarchy(pair):
+    from lss_kernels.hierarchy import PatchHierarchy
+    pool = FieldPool()
+    h = PatchHierarchy(pool, H, W, C, SIZES)
+    lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
+    pool.finalize()
+    lf.from_numpy(pair[0])
+    rf.from_numpy(pair[1])
+    h.build_costs(lf, rf)
+    yield h
+    pool.destroy()
+
+
+def _inside(h, field, level):
+    m = h.levels[level].margin
+    return field.to_numpy()[m:m + H, m:m + W]
+
+
+def test_level_geometry_children_tile_the_parent():
+    from lss_kernels.hierarchy import level_geometry
+    for lev, child in zip(level_geometry(SIZES), (1,) + SIZES):
+        covered = sorted(o - child // 2 + i for o in lev.offsets for i in range(child))
+        assert covered == list(range(-(lev.size // 2), -(lev.size // 2) + lev.size))
+
+
+def test_patch_costs_match_box_means(pair, hierarchy):
+    want = ref.patch_costs(pair[0].astype(np.float64), pair[1].astype(np.float64), C, SIZES)
+    for level in range(len(SIZES)):
+        got = _inside(hierarchy, hierarchy.cost[level], level)
+        np.testing.assert_allclose(got, want[level], atol=2e-5)
+        assert got.min() == pytest.approx(0.0, abs=1e-6)
+        assert got.max() == pytest.approx(1.0, abs=1e-6)
+
+
+def _smooth_phi(rng, shift=0.0):
+    y, x = np.mgrid[0:H, 0:W]
+    return ((12.0 - np.hypot(x - 17 - shift, (y - 11) * 1.3)) / 10.0
+            + 0.05 * rng.standard_normal((H, W)))
+
+
+def test_upward_sums_and_extremes_match_brute_force(hierarchy):
+    rng = np.random.default_rng(4)
+    D = rng.random((H, W)) * C
+    phi, phi_plus = _smooth_phi(rng), _smooth_phi(rng, 3.0)
+    pool, (fD, fphi, fplus) = _field([D, phi, phi_plus])
+    hierarchy.upward(fD, fphi, fplus)
+    for level, s in enumerate(SIZES):
+        np.testing.assert_allclose(_inside(hierarchy, hierarchy.d_sum[level], level),
+                                   ref.box_sum(D, s), rtol=1e-5, atol=1e-3)
+        np.testing.assert_allclose(_inside(hierarchy, hierarchy.phi_max[level], level),
+                                   ref.upward_extremes(phi.astype(np.float32), s, np.max))
+        np.testing.assert_allclose(_inside(hierarchy, hierarchy.phi_plus_min[level], level),
+                                   ref.upward_extremes(phi_plus.astype(np.float32), s, np.min))
+    pool.destroy()
+
+
+def test_messages_validity_and_consensus_match_reference(hierarchy):
+    rng = np.random.default_rng(5)
+    D = rng.random((H, W)) * C
+    phi, phi_plus = _smooth_phi(rng), _smooth_phi(rng, 4.0)
+    pool, (fD, fphi, fplus) = _field([D, phi, phi_plus])
+    hierarchy.upward(fD, fphi, fplus)
+    beta = 0.4 / C
+    hierarchy.messages(beta, True, True)
+    d_ps, sig_ps, valids = [], [], []
+    for level, s in enumerate(SIZES):
+        cost = _inside(hierarchy, hierarchy.cost[level], level).astype(np.float64)
+        d_mean = ref.box_mean(D.astype(np.float32), s)
+        # Eq. 4: valid = (max phi > 0) XOR (min phi(x + delta_theta) < 0)
+        valid = (ref.upward_extremes(phi.astype(np.float32), s, np.max) > 0) != \
+            (ref.upward_extremes(phi_plus.astype(np.float32), s, np.min) < 0)
+        np.testing.assert_array_equal(hierarchy.valid[level].to_numpy().astype(bool), valid)
+        d_p, sigma_p = ref.patch_messages(cost, d_mean, beta)
+        got_d = hierarchy.d_p[level].to_numpy()
+        got_s = hierarchy.sigma_p[level].to_numpy()
+        assert valid.any() or s == max(SIZES)   # the largest patches may all straddle it
+        if valid.any():
+            assert np.mean(got_d[valid] == d_p[valid]) > 0.99  # float32 ties may differ
+            same = valid & (got_d == d_p)
+            np.testing.assert_allclose(got_s[same], sigma_p[same], rtol=1e-4)
+        d_ps.append(np.where(valid, got_d, 0.0))
+        sig_ps.append(np.where(valid, got_s, 1.0))
+        valids.append(valid)
+    hierarchy.downward()
+    prec, mean = ref.consensus(d_ps, sig_ps, valids, SIZES)
+    np.testing.assert_allclose(hierarchy.precision.to_numpy(), prec, rtol=1e-4, atol=1e-12)
+    np.testing.assert_allclose(hierarchy.consensus_mean.to_numpy(), mean, rtol=1e-4,
+                               atol=1e-4)
+    pool.destroy()
+
+
+def test_first_iteration_messages_ignore_prior_and_validity(hierarchy):
+    rng = np.random.default_rng(6)
+    pool, (fD, fphi, fplus) = _field([rng.random((H, W)) * C, -np.ones((H, W)),
+                                      np.ones((H, W))])
+    hierarchy.upward(fD, fphi, fplus)   # every patch would be invalid under Eq. 4
+    hierarchy.messages(10.0, False, False)
+    for level in range(len(SIZES)):
+        assert hierarchy.valid[level].to_numpy().all()
+        cost = _inside(hierarchy, hierarchy.cost[level], level)
+        np.testing.assert_array_equal(hierarchy.d_p[level].to_numpy(), cost.argmin(2) + 1)
+    pool.destroy()
+
+
+def test_normal_equation_reduction_matches_lstsq(ti_arch):
+    from lss_kernels.shapes import GlobalShapes, basis, to_pixel_coefficients
+    rng = np.random.default_rng(7)
+    h, w = 41, 57   # several tiles, ragged edges
+    pool = FieldPool()
+    shapes = GlobalShapes(pool, h, w)
+    fields = [pool.field(ti.f32, (h, w)) for _ in range(3)]
+    pool.finalize()
+    wf = rng.random((h, w)) * (rng.random((h, w)) < 0.5)
+    wb = rng.random((h, w)) * (wf == 0)
+    target = rng.random((h, w)) * 30
+    for f, a in zip(fields, (wf, wb, target)):
+        f.from_numpy(a.astype(np.float32))
+    shapes.fit(*fields)
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    for j, wgt in enumerate((wf, wb)):
+        U = basis(x, y).reshape(-1, 6)
+        sw = np.sqrt(wgt.astype(np.float32).astype(np.float64).reshape(-1))
+        sol = np.linalg.lstsq(U * sw[:, None], target.astype(np.float32).reshape(-1) * sw,
+                              rcond=None)[0]
+        got = to_pixel_coefficients(shapes.theta.to_numpy()[j], h, w)
+        np.testing.assert_allclose(U @ got, U @ sol, atol=2e-3)
+    assert shapes.updated.to_numpy().tolist() == [1, 1]
+    pool.destroy()
+
+
+def test_shape_keeps_previous_value_with_too_few_rows(ti_arch):
+    from lss_kernels.shapes import GlobalShapes
+    pool = FieldPool()
+    shapes = GlobalShapes(pool, 8, 8)
+    wf, wb, t = (pool.field(ti.f32, (8, 8)) for _ in range(3))
+    pool.finalize()
+    shapes.set(np.array([0, 0, 0, 0, 0, 5.0]), np.array([0, 0, 0, 0, 0, 2.0]))
+    w = np.zeros((8, 8), np.float32)
+    w[0, :5] = 1           # five rows: fewer than the six unknowns
+    wf.from_numpy(w)
+    wb.from_numpy(np.ones((8, 8), np.float32))
+    t.from_numpy(np.full((8, 8), 9.0, np.float32))
+    shapes.fit(wf, wb, t)
+    th = shapes.theta.to_numpy()
+    assert th[0, 5] == pytest.approx(5.0) and shapes.updated[0] == 0
+    assert th[1, 5] == pytest.approx(9.0, abs=1e-3) and shapes.updated[1] == 1
+    pool.destroy()
+
+
+@pytest.mark.parametrize("shape", [(13, 17, 1), (9, 11, 7), (1, 30, 1)])
+def test_distance_transform_is_exact(ti_arch, shape):
+    from lss_kernels.distance import INF, DistanceTransform
+    rng = np.random.default_rng(8)
+    feat = rng.random(shape) < 0.06
+    feat.flat[5] = True
+    pool = FieldPool()
+    f = pool.field(ti.f32, shape)
+    pool.finalize()
+    f.from_numpy(np.where(feat, 0, INF).astype(np.float32))
+    edt = DistanceTransform(shape, max_scratch=5 * max(shape))   # several batches
+    edt.run(f)
+    pts = np.argwhere(feat)
+    grid = np.stack(np.meshgrid(*map(np.arange, shape), indexing="ij"), -1).reshape(-1, 3)
+    brute = ((grid[:, None, :] - pts[None]) ** 2).sum(-1).min(1).reshape(shape)
+    np.testing.assert_allclose(f.to_numpy(), brute)
+    edt.destroy()
+    pool.destroy()
+
+
+@pytest.fixture(scope="module")
+def levelset(ti_arch):
+    from lss_kernels.levelset import LevelSet
+    pool = FieldPool()
+    ls = LevelSet(pool, H, W, Params())
+    pool.finalize()
+    ls.setup()
+    yield ls
+    ls.destroy()
+    pool.destroy()
+
+
+def test_median_filter_matches_numpy(levelset):
+    rng = np.random.default_rng(9)
+    a = rng.standard_normal((H, W)).astype(np.float32)
+    levelset.phi_next.from_numpy(a)
+    levelset.median(levelset.phi_next, levelset.phi)
+    np.testing.assert_array_equal(levelset.phi.to_numpy(), ref.median_filter(a, 7))
+
+
+def test_median_network_sorts_and_its_pruned_form_selects_the_median():
+    from lss_kernels.levelset import median_network
+    rng = np.random.default_rng(10)
+    for n in (9, 25, 49):
+        ops, size, n_low, index, pairs = median_network(n)
+        assert len(ops) < len(pairs)
+        for _ in range(50):
+            x = rng.standard_normal(n)
+            pad = lambda: np.concatenate([np.full(n_low, -np.inf), x,
+                                          np.full(size - n - n_low, np.inf)])
+            v = pad()
+            for a, b in pairs:
+                if v[a] > v[b]:
+                    v[a], v[b] = v[b], v[a]
+            assert np.all(v[:-1] <= v[1:])
+            v = pad()
+            for a, b, keep_min, keep_max in ops:
+                lo, hi = min(v[a], v[b]), max(v[a], v[b])
+                if keep_min:
+                    v[a] = lo
+                if keep_max:
+                    v[b] = hi
+            assert v[index] == np.median(x)
+
+
+def test_derivatives_and_curvature_match_reference(levelset):
+    rng = np.random.default_rng(11)
+    phi = _smooth_phi(rng).astype(np.float32)
+    levelset.phi.from_numpy(phi)
+    levelset.derivatives()
+    want = ref.gaussian_derivatives(phi.astype(np.float64), 4.0)
+    for got, w in zip((levelset.phi_x, levelset.phi_y, levelset.phi_xx, levelset.phi_yy,
+                       levelset.phi_xy), want):
+        np.testing.assert_allclose(got.to_numpy(), w, atol=1e-5)
+    k, nx, ny = ref.curvature(phi.astype(np.float64), 4.0, 10.0)
+    np.testing.assert_allclose(levelset.kappa.to_numpy(), k, atol=2e-3)
+    np.testing.assert_allclose(levelset.normal_x.to_numpy(), nx, atol=1e-4)
+
+
+def test_curvature_of_a_disc_is_minus_one_over_radius(levelset):
+    y, x = np.mgrid[0:H, 0:W]
+    r = 9.0
+    phi = (r - np.hypot(x - 17, y - 11)) * 0.01      # foreground inside: kappa = -1/r
+    levelset.phi.from_numpy(phi.astype(np.float32))
+    levelset.derivatives()
+    kappa = levelset.kappa.to_numpy()
+    # on the row through the centre, away from the top and bottom borders (symmetric borders
+    # mirror the disc there)
+    assert kappa[11, 17 - 9] == pytest.approx(-1 / r, rel=0.06)
+    assert kappa[11, 17 + 9] == pytest.approx(-1 / r, rel=0.06)
+
+
+def test_reinitialise_gives_scaled_signed_distance(levelset):
+    y, x = np.mgrid[0:H, 0:W]
+    mask = (x >= 10) & (x < 25)                 # a vertical band: distance along x only
+    levelset.set_from_mask(mask)
+    phi = levelset.phi.to_numpy()
+    dist_in = np.minimum(x - 10, 24 - x) + 0.5
+    dist_out = np.where(x < 10, 10 - x, x - 24) - 0.5
+    np.testing.assert_allclose(phi, 0.01 * np.where(mask, dist_in, -dist_out), atol=1e-6)
