@@ -1,0 +1,66 @@
+"""The scaling benchmark: a tiny in-process run through the Python API, its outputs, and the
+pure helpers."""
+import argparse
+import json
+import math
+
+import numpy as np
+import pytest
+
+from lss_kernels import bench
+
+TINY = dict(sizes=[(56, 40)], size_d=16, disparities=[], disp_size=(56, 40),
+            compare=(56, 40, 16), iterations=1, numpy_iterations=1)
+
+
+def test_tiny_run_returns_the_expected_keys(ti_arch, tmp_path):
+    result = bench.run_benchmark(quick=True, arch=ti_arch, overrides=TINY, isolate=False,
+                                 out=str(tmp_path), log=lambda *a: None)
+    assert len(result["rows"]) == 1 and result["rows"][0]["sweep"] == "compare+size"
+    s = bench.summary(result)
+    json.dumps(s)  # one JSON object
+    for key in ("taichi", "numpy", "speedup"):
+        assert set(s[key]) == set(bench.STAGES)
+        assert all(v >= 0 for v in s[key].values())
+    assert s["taichi_iteration"] > 0 and s["numpy_iteration"] > 0
+    assert s["speedup_iteration"] == pytest.approx(s["numpy_iteration"] / s["taichi_iteration"])
+    assert s["bandwidth_gbs"] > 0 and s["maxrss_bytes"] > 0
+    row = result["rows"][0]
+    assert row["c_max"] == 8 and row["work"] == 56 * 40 * 8
+    assert row["memory_bytes"] >= row["level_bytes"] > 0
+    assert row["memory_model_bytes"] == 4 * 56 * 40 * 8 * (3 + 2)
+    for name in ("scaling.csv", "speedup.csv", "results.json", "results.md"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert "Taichi vs numpy" in (tmp_path / "results.md").read_text()
+
+
+def test_plan_merges_repeated_configurations():
+    configs = bench.plan(quick=True, threads=[2, 1])
+    keys = [(c["width"], c["height"], c["d_max"], c["threads"]) for c in configs]
+    assert len(keys) == len(set(keys))
+    assert configs[0]["numpy_iterations"] > 0 and configs[0]["sweep"].startswith("compare")
+    assert sum(c["numpy_iterations"] > 0 for c in configs) == 1
+    assert any(c["threads"] == 1 for c in configs)
+
+
+def test_fit_exponent_and_plot(tmp_path):
+    work = np.array([1e4, 1e5, 1e6])
+    assert bench.fit_exponent(work, 3e-9 * work ** 1.05) == pytest.approx(1.05)
+    assert math.isnan(bench.fit_exponent([1e4], [1.0]))
+    rows = [dict(threads="default", work=w, iteration=1e-8 * w,
+                 **{f"stage_{k}": 1e-9 * w for k in bench.STAGES}) for w in work]
+    result = dict(rows=rows, arch="cpu", exponents={k: 1.0 for k in bench.STAGES})
+    bench.plot(result, str(tmp_path / "p.png"))
+    assert (tmp_path / "p.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_synthetic_pair_and_cli_registration():
+    left, right, init = bench.synthetic_pair(40, 30, 8, seed=3)
+    assert left.shape == right.shape == (30, 40, 3) and left.dtype == np.float32
+    assert 0.0 <= left.min() and left.max() <= 1.0 and len(init) == 4
+    assert not np.array_equal(left, right)
+    parser = argparse.ArgumentParser()
+    bench.add_cli(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["bench", "--quick", "--json", "--threads", "2", "1"])
+    assert args.func is bench.main_bench and args.quick and args.json
+    assert args.threads == [2, 1] and args.arch == "cpu"

@@ -1,0 +1,99 @@
+"""The numpy specification of one iteration against Solver.step().
+
+Tolerances: the kernels work in float32 (eps 1.2e-7), the numpy specification in float64, from
+the same float32 state.  phi is O(0.01-0.3) here (phi_scale 0.01 x a distance of a few pixels)
+and one step changes it by dt x O(1) x 1/pi; the 29-tap Gaussian-derivative filters and the
+per-pixel sums keep float32 round-off near 1e-6 of the values, so 1e-4 (absolute, phi) leaves a
+factor ~10 of margin after several iterations (observed: ~1e-6 after one, <1e-4 after six).
+Theta comes from float32 normal equations whose condition number (normalised basis, squared
+precision weights) is ~1e3-1e4, so its relative error is ~1e-4; the tolerance is 3e-3 of the
+largest coefficient.  The consensus is a sum of float32 reciprocals: precision rtol 1e-5, mean
+1e-3 cyclopean pixels; the set of pixels with no valid patch must match exactly.
+"""
+import numpy as np
+import pytest
+
+from lss_kernels import numpy_iteration as npi
+from lss_kernels.bench import synthetic_pair
+from lss_kernels.params import Params
+
+H, W, D_MAX = 40, 56, 16
+PARAMS = Params(reinit_every=3, max_iterations=1000, stop_fraction=0.0)
+
+
+def _check(kernel, spec, theta_rtol=3e-3, phi_atol=1e-4):
+    phi_k, phi_n = kernel.phi, spec.phi
+    assert np.abs(phi_k - phi_n).max() < phi_atol
+    # the foreground itself: signs may only differ where |phi| is at round-off level
+    differ = (phi_k > 0) != (phi_n > 0)
+    assert np.all(np.abs(phi_n[differ]) < phi_atol)
+    scale = max(1.0, np.abs(spec.theta).max())
+    assert np.abs(kernel.theta - spec.theta).max() < theta_rtol * scale
+    pk, pn = kernel.extra["precision"], spec.extra["precision"]
+    np.testing.assert_array_equal(pk > 0, pn > 0)
+    np.testing.assert_allclose(pk, pn, rtol=1e-5, atol=0)
+    mk, mn = kernel.extra["consensus_mean"], spec.extra["consensus_mean"]
+    assert np.abs(mk - mn).max() < 1e-3
+
+
+@pytest.fixture(scope="module")
+def solver(ti_arch):
+    from lss_kernels.solver import Solver
+    left, right, init = synthetic_pair(W, H, D_MAX, seed=1)
+    s = Solver(left, right, D_MAX, init, params=PARAMS)
+    yield s
+    s.close()
+
+
+def test_one_and_several_iterations_match_the_kernels(solver):
+    start = npi.state_from_solver(solver)
+    assert start.phi.shape == (H, W) and start.c_max == 8
+    assert [c.shape for c in start.costs] == [(H, W, 8)] * 3
+
+    # one iteration from the same state (the first: no prior, every patch valid)
+    solver.step()
+    after_one = npi.state_from_solver(solver)
+    spec, seconds = npi.iteration(start, PARAMS)
+    assert set(seconds) == set(npi.STAGES)
+    _check(after_one, spec, theta_rtol=1e-3, phi_atol=2e-5)
+    assert spec.extra["flipped"] == solver.history[-1]["flipped"]
+
+    # five more, numpy running on its own state (prior, validity, two re-initialisations)
+    for _ in range(5):
+        solver.step()
+        spec, _ = npi.iteration(spec, PARAMS)
+    kernel = npi.state_from_solver(solver)
+    assert kernel.iteration == spec.iteration == 6
+    _check(kernel, spec)
+    np.testing.assert_allclose(kernel.D, spec.D, atol=5e-2)
+
+
+def test_patch_sums_are_transposes():
+    """Upward sums over a patch and downward sums over the patches containing a pixel are
+    adjoint; for an even size they are different boxes."""
+    rng = np.random.default_rng(0)
+    a, b = rng.random((12, 15)), rng.random((12, 15))
+    for size in (3, 9, 18):
+        lhs = (npi._box_sum(a, size) * b).sum()
+        rhs = (a * npi._patches_containing(b, size)).sum()
+        assert lhs == pytest.approx(rhs, rel=1e-12)
+    imp = np.zeros((30, 30))
+    imp[15, 15] = 1.0
+    ys, xs = np.nonzero(npi._patches_containing(imp, 18))
+    # the patch centred on 15 covers 6 .. 23
+    assert (ys.min(), ys.max(), xs.min(), xs.max()) == (6, 23, 6, 23)
+
+
+def test_median_and_reinitialisation():
+    rng = np.random.default_rng(1)
+    phi = rng.standard_normal((9, 11))
+    med = npi._median(phi, 7)
+    pad = np.pad(phi, 3, mode="symmetric")
+    assert med[4, 5] == np.median(pad[4:11, 5:12])
+    assert med[0, 0] == np.median(pad[0:7, 0:7])
+    mask = np.zeros((20, 20))
+    mask[5:15, 5:15] = 1.0
+    sd = npi._reinitialise(np.where(mask > 0, 1.0, -1.0), 0.01)
+    assert np.array_equal(sd > 0, mask > 0)
+    assert sd[10, 10] == pytest.approx(0.01 * (5 - 0.5))   # 5 pixels to the nearest outside
+    assert sd[0, 10] == pytest.approx(-0.01 * (5 - 0.5))
