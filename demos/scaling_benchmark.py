@@ -3,9 +3,14 @@
     python demos/scaling_benchmark.py --quick --json
     python demos/scaling_benchmark.py --out docs/bench --threads 2 1
 """
+import os
 import sys
 
-from lss_kernels.bench import main
+if "--json" in sys.argv:
+    # keep stdout to the one JSON object: no Taichi banner on import
+    os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
+
+from lss_kernels.bench import main  # noqa: E402
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -297,9 +297,7 @@ def run_benchmark(quick=False, arch="cpu", threads=(None,), out=None, log=print,
                 f"{1e3 * compare['taichi_iteration']:.2f} ms: {compare['speedup_iteration']:.1f}x")
     result = dict(arch=arch, quick=bool(quick), cpu_count=os.cpu_count(), bandwidth_gbs=bw,
                   isolated=bool(isolate), offline_cache=not cold, rows=rows)
-    first = [r for r in rows if r["threads"] == rows[0]["threads"]]
-    sized = [r for r in first if "size" in r["sweep"].split("+") or "compare" in r["sweep"]]
-    sized = [r for r in sized if r["d_max"] == sized[0]["d_max"]] if sized else []
+    first, sized = _size_series(rows)
     expo, expo_px = {}, {}
     for k in STAGES + ("iteration",):
         key = k if k == "iteration" else f"stage_{k}"
@@ -375,31 +373,46 @@ def write_outputs(result, out):
         f.write(report(result))
 
 
+def _size_series(rows):
+    """The rows of the size sweep (first thread setting, one d_max), by pixels."""
+    t0 = rows[0]["threads"]
+    first = [r for r in rows if r["threads"] == t0]
+    sized = [r for r in first if "size" in r["sweep"].split("+") or "compare" in r["sweep"]]
+    sized = [r for r in sized if r["d_max"] == sized[0]["d_max"]] if sized else []
+    return first, sorted(sized, key=lambda r: r["work"])
+
+
 def plot(result, path):
-    """Log-log seconds per stage vs pixels x disparities (first thread setting), with the
-    fitted exponents in the legend (matplotlib Agg, no pyplot)."""
+    """Log-log seconds per stage vs pixels x disparities (first thread setting): lines for the
+    size sweep, crosses for the other configurations (the disparity sweep), with the fitted
+    exponents in the legend (matplotlib Agg, no pyplot)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    rows = result["rows"]
-    t0 = rows[0]["threads"]
-    rows = sorted((r for r in rows if r["threads"] == t0), key=lambda r: r["work"])
+    first, sized = _size_series(result["rows"])
+    others = [r for r in first if r not in sized]
     fig = Figure(figsize=(7.5, 5.0), dpi=90)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
-    work = np.array([r["work"] for r in rows], np.float64)
     for k in STAGES + ("iteration",):
         key = k if k == "iteration" else f"stage_{k}"
-        s = np.array([r[key] for r in rows], np.float64)
         e = result["exponents"].get(k, float("nan"))
         style = dict(marker="*", color="k", lw=2.0) if k == "iteration" else dict(marker="o",
                                                                                 lw=1.0)
-        ax.loglog(work, np.maximum(s, 1e-7), ms=3, label=f"{k} (slope {e:.2f})", **style)
-    w0 = work.min()
-    ref = max(r["iteration"] for r in rows if r["work"] == w0)
-    ax.loglog(work, ref * work / w0, "k:", lw=0.8, label="slope 1")
-    ax.set_xlabel("pixels x cyclopean disparities (c_max = d_max / 2)")
+        line, = ax.loglog([r["work"] for r in sized],
+                          [max(r[key], 1e-7) for r in sized], ms=3,
+                          label=f"{k} (slope {e:.2f})", **style)
+        if others:
+            ax.loglog([r["work"] for r in others], [max(r[key], 1e-7) for r in others], "x",
+                      color=line.get_color(), ms=5)
+    if sized:
+        w0, s0 = sized[0]["work"], sized[0]["iteration"]
+        ws = np.array([r["work"] for r in sized], np.float64)
+        ax.loglog(ws, s0 * ws / w0, "k:", lw=0.8, label="slope 1")
+    ax.set_xlabel("pixels x cyclopean disparities (c_max = d_max / 2); "
+                  "lines: size sweep, x: disparity sweep")
     ax.set_ylabel("seconds per iteration")
-    ax.set_title(f"lss solver stages ({result['arch']}, threads={t0})")
+    ax.set_title(f"lss solver stages ({result['arch']}, threads={first[0]['threads']}); "
+                 "slopes: all points")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()

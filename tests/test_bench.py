@@ -47,7 +47,7 @@ def test_fit_exponent_and_plot(tmp_path):
     work = np.array([1e4, 1e5, 1e6])
     assert bench.fit_exponent(work, 3e-9 * work ** 1.05) == pytest.approx(1.05)
     assert math.isnan(bench.fit_exponent([1e4], [1.0]))
-    rows = [dict(threads="default", work=w, iteration=1e-8 * w,
+    rows = [dict(threads="default", sweep="size", d_max=64, work=w, iteration=1e-8 * w,
                  **{f"stage_{k}": 1e-9 * w for k in bench.STAGES}) for w in work]
     result = dict(rows=rows, arch="cpu", exponents={k: 1.0 for k in bench.STAGES})
     bench.plot(result, str(tmp_path / "p.png"))
