@@ -36,24 +36,67 @@ def check_inputs(left, right, d_max, init, init_frame, params):
     return left, right, float(d_max), check_init(init, (H, W))
 
 
+def _describe(value):
+    """A short one-line description of a value for error messages (arrays by shape)."""
+    if isinstance(value, np.ndarray):
+        return f"an array of shape {value.shape} ({value.dtype})"
+    text = repr(value).replace("\n", " ")
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def check_init(init, shape):
     """An ellipse ``(cx, cy, rx, ry)`` that overlaps the image with positive radii, or a
-    non-empty boolean mask of the image's shape."""
+    non-empty boolean mask of the image's shape.
+
+    Parameters
+    ----------
+    init : sequence of 4 numbers, or array-like ``(H, W)``
+        The ellipse in pixel coordinates (0-based, x to the right, y down), or a mask (bool,
+        or numbers where nonzero means foreground).
+    shape : (int, int)
+        ``(H, W)`` of the images.
+
+    Returns
+    -------
+    tuple of 4 float, or ndarray bool ``(H, W)``
+
+    Raises
+    ------
+    ValueError
+        One line naming ``init``, what was expected and what was given.
+    """
     H, W = shape
-    if isinstance(init, np.ndarray) and init.ndim == 2:
-        if init.shape != (H, W):
-            raise ValueError(f"init: expected a mask of shape {(H, W)}, got {init.shape}")
-        mask = init.astype(bool) if init.dtype == bool else np.asarray(init) != 0
+    if isinstance(init, (str, bytes)):
+        raise ValueError(f"init: expected an ellipse (cx, cy, rx, ry) or a boolean mask, "
+                         f"got the string {_describe(init)}")
+    if not isinstance(init, np.ndarray):
+        try:
+            as_array = np.asarray(init)
+        except Exception:  # ragged or exotic sequences: reported as not an ellipse below
+            as_array = None
+        if as_array is not None and as_array.ndim >= 2:
+            init = as_array
+    if isinstance(init, np.ndarray) and init.ndim != 1:
+        if init.ndim != 2 or init.shape != (H, W):
+            raise ValueError(f"init: expected a mask of shape {(H, W)}, got shape {init.shape}")
+        if init.dtype == bool:
+            mask = init
+        elif np.issubdtype(init.dtype, np.number):
+            if not np.isfinite(init).all():
+                raise ValueError("init: expected a mask of finite values, got NaN or inf")
+            mask = init != 0
+        else:
+            raise ValueError(f"init: expected a boolean or numeric mask, got dtype {init.dtype}")
         if not mask.any():
             raise ValueError("init: the mask is empty (no foreground pixel)")
         if mask.all():
             raise ValueError("init: the mask covers the whole image (no background pixel)")
-        return mask
+        return np.ascontiguousarray(mask, dtype=bool)
     try:
         values = tuple(float(v) for v in init)
     except (TypeError, ValueError):
         raise ValueError(f"init: expected an ellipse (cx, cy, rx, ry) or a boolean mask, "
-                         f"got {init!r}") from None
+                         f"got {_describe(init)}") from None
     if len(values) != 4:
         raise ValueError(f"init: expected an ellipse of 4 numbers (cx, cy, rx, ry), "
                          f"got {len(values)}")
@@ -66,7 +109,9 @@ def check_init(init, shape):
         raise ValueError(f"init: the ellipse centred at ({cx:g}, {cy:g}) with radii "
                          f"({rx:g}, {ry:g}) lies outside the {W}x{H} image")
     y, x = np.mgrid[0:H, 0:W]
-    if not (((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0).any():
+    with np.errstate(over="ignore"):       # tiny radii: the distances overflow to inf
+        covers = (((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0).any()
+    if not covers:
         raise ValueError(f"init: the ellipse ({cx:g}, {cy:g}, {rx:g}, {ry:g}) covers no pixel "
                          f"of the {W}x{H} image")
     return values
@@ -85,9 +130,13 @@ def parse_init(text):
             values = ()
         if len(values) != 4:
             raise ValueError(f"--init: expected ellipse:CX,CY,RX,RY with 4 numbers, got {text!r}")
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError(f"--init: expected 4 finite numbers, got {text!r}")
         return values
     if kind == "mask" or text.lower().endswith(".png"):
         from .io import read_mask
+        if kind == "mask" and not rest:
+            raise ValueError(f"--init: expected mask:PATH with a path, got {text!r}")
         return read_mask(rest if kind == "mask" else text, name="--init")
     raise ValueError(f"--init: unknown kind {kind!r}; expected ellipse:CX,CY,RX,RY or "
                      f"mask:PATH")
