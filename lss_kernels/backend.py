@@ -58,7 +58,12 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
         kwargs["cpu_max_num_threads"] = threads
     if arch in ("cuda", "vulkan", "metal", "opengl"):
         kwargs["enable_fallback"] = False
-    ti.init(**kwargs)
+    try:
+        ti.init(**kwargs)
+    except RuntimeError as exc:
+        _state["arch"] = _state["threads"] = None
+        raise ValueError(f"arch: {arch!r} is not available on this machine "
+                         f"({str(exc).splitlines()[0]})") from None
     _state["arch"], _state["threads"] = arch, threads
     return arch
 

@@ -22,7 +22,7 @@ from .backend import ARCHES
 
 __all__ = ["main"]
 
-SUBCOMMAND_MODULES = ("demo", "evaluate")
+SUBCOMMAND_MODULES = ("demo", "evaluate", "bench")
 
 
 class CliError(Exception):

@@ -77,9 +77,9 @@ class Params:
     reinit_every: int = 10
     median_size: int = 7
     max_iterations: int = 1500
-    min_iterations: int = 60
+    min_iterations: int = 200
     stop_window: int = 20
-    stop_fraction: float = 0.002
+    stop_fraction: float = 0.001
     phi_scale: float = 0.01
     curvature_sigma: float = 4.0
     curvature_clip: float = 10.0

@@ -73,11 +73,15 @@ def patch_messages(cost, d_mean, beta, valid=None):
 def consensus(d_p, sigma_p, valid, sizes):
     """Eq. 7: per pixel, 1/sigma^2 and d-bar from all valid patches (of every level) that
     contain it.  Lists per level of ``(H, W)`` arrays; returns ``(precision, mean)``."""
-    a = sum(box_sum(np.where(v, 1.0 / s ** 2, 0.0), size)
+    # the patches containing a pixel are centred on the mirrored box (it matters for even
+    # sizes): flip, box-sum, flip back
+    gather = lambda a, size: box_sum(a[::-1, ::-1], size)[::-1, ::-1]
+    a = sum(gather(np.where(v, 1.0 / s ** 2, 0.0), size)
             for s, v, size in zip(sigma_p, valid, sizes))
-    b = sum(box_sum(np.where(v, d / s ** 2, 0.0), size)
+    b = sum(gather(np.where(v, d / s ** 2, 0.0), size)
             for d, s, v, size in zip(d_p, sigma_p, valid, sizes))
     with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.where(a > 1e-12 * max(a.max(), 1e-300), a, 0.0)  # summed-area round-off
         mean = np.where(a > 0, b / a, 0.0)
     return a, mean
 

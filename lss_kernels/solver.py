@@ -39,7 +39,7 @@ class Result:
     """Output of :func:`solve`.
 
     Left view (the user's frame, Middlebury convention): ``disparity`` ``(H, W)`` float32 in
-    left-view pixels (finite, ``>= 0``), ``occlusion`` (seen by the left camera, hidden from
+    left-view pixels (finite, clamped to ``[0, d_max]``), ``occlusion`` (seen by the left camera, hidden from
     the right) and ``foreground`` boolean ``(H, W)``.
 
     Cyclopean frame (the model's): ``phi`` ``(H, W)`` (> 0 foreground), ``consensus_mean`` and
@@ -202,7 +202,9 @@ class Solver:
     def _update_D(self):
         for y, x in self.D:
             j = 0 if self.levelset.phi[y, x] > 0 else 1
-            self.D[y, x] = self.shapes.value(j, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+            v = self.shapes.value(j, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+            # a quadratic can extrapolate outside the searched range: D stays inside it
+            self.D[y, x] = ti.min(ti.max(v, 0.0), ti.cast(self.c_max, ti.f32))
 
     # ------------------------------------------------------------------ the iteration
     def _stage(self, name, t):
@@ -289,7 +291,8 @@ class Solver:
         """Left-view ``(disparity, occlusion, foreground)`` of the current model."""
         self.occ.render_left(self.shapes, self.levelset.phi)
         d = self.occ.disparity_left.to_numpy()
-        return (np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32),
+        d = np.clip(np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0), 0.0, self.d_max)
+        return (d.astype(np.float32),
                 self.occ.occlusion_left.to_numpy().astype(bool),
                 self.occ.foreground_left.to_numpy().astype(bool))
 

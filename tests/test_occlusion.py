@@ -1,0 +1,98 @@
+"""delta_theta and the left-view rendering against hand-built two-plane cases."""
+import numpy as np
+import pytest
+import taichi as ti
+
+from lss_kernels import reference as ref
+from lss_kernels.backend import FieldPool
+
+H, W, C = 12, 64, 16
+X = np.broadcast_to(np.arange(W, dtype=np.float64), (H, W))
+
+
+@pytest.fixture(scope="module")
+def geometry(ti_arch):
+    from lss_kernels.occlusion import OcclusionGeometry
+    from lss_kernels.shapes import GlobalShapes
+    pool = FieldPool()
+    occ = OcclusionGeometry(pool, H, W, C)
+    shapes = GlobalShapes(pool, H, W)
+    phi, phi_x, ones, zeros, target = (pool.field(ti.f32, (H, W)) for _ in range(5))
+    pool.finalize()
+    ones.from_numpy(np.ones((H, W), np.float32))
+
+    def setup(theta1, theta2, fg):
+        """Theta_j as exact planes (fitted from their own values), phi = 0.01 x signed
+        distance of the foreground columns ``fg`` (a boolean over x)."""
+        y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+        for j, th in enumerate((theta1, theta2)):
+            target.from_numpy(th(x, y).astype(np.float32))
+            shapes.fit(ones if j == 0 else zeros, zeros if j == 0 else ones, target)
+        cols = np.arange(W)
+        edges = np.flatnonzero(np.diff(fg.astype(int))) + 0.5
+        dist = np.min(np.abs(cols[:, None] - edges[None, :]), axis=1)
+        p = 0.01 * np.where(fg, dist, -dist)
+        phi.from_numpy(np.broadcast_to(p, (H, W)).astype(np.float32))
+        phi_x.from_numpy(np.broadcast_to(np.gradient(p), (H, W)).astype(np.float32))
+        occ.compute(shapes, phi, phi_x, 1)
+        occ.render_left(shapes, phi)
+        return p
+    yield occ, shapes, setup
+    pool.destroy()
+
+
+def _fg_band(lo, hi):
+    return (np.arange(W) >= lo) & (np.arange(W) < hi)
+
+
+def test_occluded_extent_equals_the_jump_on_both_sides(geometry):
+    occ, _, setup = geometry
+    fg = _fg_band(20, 40)
+    phi = setup(lambda x, y: 10 + 0 * x, lambda x, y: 4 + 0 * x, fg)
+    dt = occ.delta_theta.to_numpy()[0]
+    assert np.allclose(dt[:20], 6.0) and np.allclose(dt[40:], -6.0)
+    visible_bg = (phi < 0) & (occ.phi_plus.to_numpy()[0] < 0)
+    hidden = np.flatnonzero((phi < 0) & ~visible_bg)
+    # the jump is 6 cyclopean pixels: 6 background pixels left of the left boundary and 6
+    # right of the right boundary are occluded
+    assert hidden.tolist() == list(range(14, 20)) + list(range(40, 46))
+
+
+def test_ray_cast_on_a_slanted_background_matches_the_analytic_intersection(geometry):
+    occ, _, setup = geometry
+    k = 0.25
+    th1 = lambda x, y: 12 + 0 * x
+    th2 = lambda x, y: 2 + k * (x - 32) / 8
+    fg = _fg_band(20, 44)
+    p = setup(th1, th2, fg)
+    got = occ.delta_theta.to_numpy()
+    s = np.sign(np.gradient(p))
+    # t = Theta_1 - Theta_2(x - s t)  =>  t (1 - s k / 8) = 12 - 2 - k (x - 32) / 8
+    t = (10 - k * (X - 32) / 8) / (1 - s * k / 8)
+    want = np.where(s != 0, s * t, 0)
+    np.testing.assert_allclose(got, want, atol=1e-4)
+    np.testing.assert_allclose(got, ref.delta_theta(th1, th2, np.broadcast_to(np.gradient(p),
+                                                                           (H, W))), atol=1e-4)
+    # the release's approximation (Theta_1 - Theta_2 at x) differs on a slanted background
+    assert np.abs(got - s * (th1(X, 0) - th2(X, 0))).max() > 0.1
+
+
+def test_no_jump_no_occlusion(geometry):
+    occ, _, setup = geometry
+    setup(lambda x, y: 4 + 0 * x, lambda x, y: 9 + 0 * x, _fg_band(20, 40))
+    assert np.all(occ.delta_theta.to_numpy() == 0)
+
+
+def test_left_view_rendering_of_two_fronto_parallel_planes(geometry):
+    occ, _, setup = geometry
+    setup(lambda x, y: 10 + 0 * x, lambda x, y: 4 + 0 * x, _fg_band(20, 40))
+    fg = occ.foreground_left.to_numpy()[0].astype(bool)
+    occl = occ.occlusion_left.to_numpy()[0].astype(bool)
+    d = occ.disparity_left.to_numpy()[0]
+    # x_left = x_c + c: the cyclopean band [20, 40) appears at [30, 50) in the left view
+    assert np.flatnonzero(fg).tolist() == list(range(30, 50))
+    assert np.allclose(d[fg], 20.0) and np.allclose(d[~fg], 8.0)
+    # seen by the left camera, hidden from the right: left of the foreground only, as wide
+    # as the left-view disparity jump (20 - 8 = 12)
+    assert np.flatnonzero(occl).tolist() == list(range(18, 30))
+    assert not (occl & fg).any()
