@@ -38,6 +38,8 @@ def _add_solve(subparsers):
     p.add_argument("images", nargs="*", metavar="LEFT RIGHT", help="left and right images")
     p.add_argument("--scene", metavar="DIR", help="scene folder (reads d_max and init_ellipse "
                    "from meta.json)")
+    p.add_argument("--preset", metavar="NAME", help="a built-in rendered scene with ground "
+                   "truth (easy, slanted, tiny) instead of files")
     p.add_argument("--dmax", type=float, metavar="N", help="largest disparity, left-view px")
     p.add_argument("--init", metavar="SPEC", help="ellipse:CX,CY,RX,RY (left-view pixels) or "
                    "mask:PATH (8-bit PNG, 255 = foreground)")
@@ -80,11 +82,12 @@ def _params(args):
 def _inputs(args):
     """(left, right, d_max, init, init_frame, scene) from the solve/demo arguments."""
     from .validate import parse_init
-    if args.scene and args.images:
-        raise CliError("give either --scene DIR or LEFT RIGHT, not both")
-    if args.scene:
+    if sum(map(bool, (args.scene, args.images, args.preset))) > 1:
+        raise CliError("give one of --scene DIR, --preset NAME or LEFT RIGHT")
+    if args.scene or args.preset:
         from .io import load_scene
-        scene = load_scene(args.scene)
+        from .scenes import make_scene
+        scene = load_scene(args.scene) if args.scene else make_scene(args.preset)
         d_max = args.dmax if args.dmax is not None else scene.d_max
         if args.init:
             return scene.left, scene.right, d_max, parse_init(args.init), "left", scene
