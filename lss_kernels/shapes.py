@@ -71,12 +71,6 @@ class GlobalShapes:
         t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
         return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
 
-    @ti.func
-    def dvalue_dx(self, j, x, y):
-        xn = (x - self.cx) * self.inv_s
-        yn = (y - self.cy) * self.inv_s
-        return (2.0 * self.theta[j, 0] * xn + self.theta[j, 1] * yn + self.theta[j, 3]) * self.inv_s
-
     @ti.kernel
     def _from_pixels(self, weight_fg: ti.template(), weight_bg: ti.template(),
                      target: ti.template(), out: ti.template()):
