@@ -30,7 +30,7 @@ import numpy as np
 from . import viz
 
 __all__ = ["run_demo", "add_cli", "main_demo", "parse_init", "parse_patch", "default_patch",
-           "read_image", "recorded_iterations"]
+           "recorded_iterations"]
 
 DEFAULT_PRESET = "easy"
 
@@ -39,56 +39,15 @@ DEFAULT_PRESET = "easy"
 # Parsing
 # ---------------------------------------------------------------------------------------------
 
-def read_image(path) -> np.ndarray:
-    """Read an image file as float32 ``(H, W, 3)`` in [0, 1] (grey is repeated, alpha dropped)."""
-    import imageio.v3 as iio
-    a = np.asarray(iio.imread(path))
-    if a.ndim == 2:
-        a = np.repeat(a[..., None], 3, axis=2)
-    if a.ndim != 3 or a.shape[2] < 3:
-        raise ValueError(f"{path}: expected an RGB or grey image, got shape {a.shape}")
-    a = a[..., :3]
-    if np.issubdtype(a.dtype, np.integer):
-        return (a.astype(np.float32) / float(np.iinfo(a.dtype).max)).astype(np.float32)
-    return np.clip(a.astype(np.float32), 0.0, 1.0)
-
-
 def parse_init(text: str, shape=None):
-    """Parse ``--init``: ``ellipse:CX,CY,RX,RY`` (left-view pixels) or a mask image path.
-
-    Returns a tuple ``(cx, cy, rx, ry)`` of floats or an ``(H, W)`` bool mask (non-zero
-    pixels are foreground).  Raises ``ValueError`` with a one-line message.
-    """
+    """Parse ``--init`` (``ellipse:CX,CY,RX,RY`` or a mask PNG) with
+    :func:`lss_kernels.validate.parse_init` and, given the image ``shape``, check it against
+    the image with :func:`lss_kernels.validate.check_init`."""
+    from .validate import check_init, parse_init as parse
     if text is None:
         raise ValueError("--init: required with LEFT RIGHT (ellipse:CX,CY,RX,RY or a mask PNG)")
-    if text.startswith("ellipse:"):
-        parts = text[len("ellipse:"):].split(",")
-        try:
-            values = tuple(float(p) for p in parts)
-        except ValueError:
-            values = ()
-        if len(values) != 4 or not all(np.isfinite(values)):
-            raise ValueError(f"--init: expected ellipse:CX,CY,RX,RY with four numbers, got {text!r}")
-        if values[2] <= 0 or values[3] <= 0:
-            raise ValueError(f"--init: the radii RX, RY must be > 0, got {text!r}")
-        return values
-    if not os.path.isfile(text):
-        raise ValueError(f"--init: expected ellipse:CX,CY,RX,RY or an existing mask image, "
-                         f"got {text!r}")
-    import imageio.v3 as iio
-    try:
-        m = np.asarray(iio.imread(text))
-    except Exception as exc:  # noqa: BLE001 - any decoder failure is a bad argument
-        raise ValueError(f"--init: cannot read mask image {text!r}: {exc}") from None
-    if m.ndim == 3:
-        m = m[..., :3].max(axis=2) if m.shape[2] >= 3 else m[..., 0]
-    mask = m > (np.iinfo(m.dtype).max // 2 if np.issubdtype(m.dtype, np.integer) else 0.5)
-    if shape is not None and mask.shape != tuple(shape):
-        raise ValueError(f"--init: mask {text!r} is {mask.shape[1]}x{mask.shape[0]}, the "
-                         f"images are {shape[1]}x{shape[0]}")
-    if not mask.any():
-        raise ValueError(f"--init: mask {text!r} has no foreground pixel")
-    return mask
+    init = parse(text)
+    return check_init(init, shape) if shape is not None else init
 
 
 def parse_patch(text: str, n_levels: int | None = None):
@@ -333,7 +292,8 @@ def main_demo(args) -> int:
             for path in images:
                 if not os.path.isfile(path):
                     raise ValueError(f"no such image file: {path!r}")
-            left, right = read_image(images[0]), read_image(images[1])
+            from .io import read_image
+            left, right = read_image(images[0], 'left'), read_image(images[1], 'right')
             if left.shape != right.shape:
                 raise ValueError(f"the images differ in size: {left.shape[1]}x{left.shape[0]} "
                                  f"and {right.shape[1]}x{right.shape[0]}")
