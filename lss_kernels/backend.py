@@ -79,6 +79,14 @@ def current_arch() -> str | None:
     return _state["arch"]
 
 
+def _bytes(dtype) -> int:
+    """Size of one element of a Taichi primitive type."""
+    for size, types in ((1, (ti.i8, ti.u8)), (2, (ti.i16, ti.u16)), (8, (ti.i64, ti.u64, ti.f64))):
+        if dtype in types:
+            return size
+    return 4
+
+
 class FieldPool:
     """Allocates fields in one SNode tree that can be freed as a whole.
 
@@ -107,10 +115,10 @@ class FieldPool:
         return f
 
     def field(self, dtype, shape, offset=None):
-        return self._place(ti.field(dtype), shape, offset, 4)
+        return self._place(ti.field(dtype), shape, offset, _bytes(dtype))
 
     def vector(self, n, dtype, shape, offset=None):
-        return self._place(ti.Vector.field(n, dtype), shape, offset, 4 * n)
+        return self._place(ti.Vector.field(n, dtype), shape, offset, n * _bytes(dtype))
 
     def finalize(self):
         self._tree = self._builder.finalize()

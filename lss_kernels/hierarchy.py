@@ -92,6 +92,19 @@ class PatchHierarchy:
         self.d_p = [pool.field(ti.f32, (H, W)) for _ in self.levels]
         self.sigma_p = [pool.field(ti.f32, (H, W)) for _ in self.levels]
         self.valid = [pool.field(ti.i32, (H, W)) for _ in self.levels]
+        # the lower envelope of C_p(c) + beta |c - m| over m (see ``_build_envelope``): per
+        # patch, the mean cost and, per candidate index k, the argmin over c <= k + 1 of
+        # C_p(c) - beta c and over c >= k + 1 of C_p(c) + beta c
+        arg_type = ti.u8 if C <= 255 else ti.u16
+        self.cost_mean = [pool.field(ti.f32, (H, W)) for _ in self.levels]
+        self.arg_below = [pool.field(arg_type, (H, W, C)) for _ in self.levels]
+        self.arg_above = [pool.field(arg_type, (H, W, C)) for _ in self.levels]
+        # per patch, the two candidates read from the envelope for the current (floor(m),
+        # ceil(m)) (``env_key``; 0 = none): re-read from the volumes only where that moved
+        self.env_key = [pool.field(ti.i32, (H, W)) for _ in self.levels]
+        self.env_arg = [pool.vector(2, ti.i32, (H, W)) for _ in self.levels]
+        self.env_cost = [pool.vector(2, ti.f32, (H, W)) for _ in self.levels]
+        self._envelope_beta = None
         # downward relays of (w / sigma^2, w d / sigma^2)
         self.relay = [padded(lev, 2) for lev in self.levels]
         # the consensus (Eq. 7)
@@ -168,6 +181,7 @@ class PatchHierarchy:
                                      self.count[i], self.levels[i].offsets)
         for vol in self.cost:
             self._normalise(vol)
+        self._envelope_beta = None
 
     # ------------------------------------------------------------------ upward, per iteration
     @ti.kernel
@@ -220,34 +234,121 @@ class PatchHierarchy:
 
     # ------------------------------------------------------------------ messages (Eq. 4, 5)
     @ti.kernel
-    def _messages(self, cost: ti.template(), count: ti.template(), d_sum: ti.template(),
-                  phi_max: ti.template(), phi_plus_min: ti.template(), d_p: ti.template(),
-                  sigma_p: ti.template(), valid: ti.template(), relay: ti.template(),
-                  beta: ti.f32, use_prior: ti.i32, use_validity: ti.i32):
+    def _messages(self, cost: ti.template(), d_p: ti.template(), sigma_p: ti.template(),
+                  valid: ti.template(), relay: ti.template()):
+        """Eq. 5 without the prior (the first iteration): d_p = argmin_c C_p(c), every patch
+        valid."""
+        C = self.C
+        for y, x in d_p:
+            valid[y, x] = 1
+            best = 1e30
+            arg = 1
+            total = 0.0
+            for k in range(C):
+                v = cost[y, x, k]
+                total += v
+                if v < best:
+                    best = v
+                    arg = k + 1
+            sigma = ti.cast(C, ti.f32) / (total / C - best + 1e-8)
+            d_p[y, x] = arg
+            sigma_p[y, x] = sigma
+            a = 1.0 / (sigma * sigma)
+            relay[y, x, 0] = a
+            relay[y, x, 1] = a * arg
+
+    @ti.kernel
+    def _build_envelope(self, cost: ti.template(), cost_mean: ti.template(),
+                        below: ti.template(), above: ti.template(), beta: ti.f32):
+        """Per patch, the running argmins that make Eq. 5 O(1) for any prior mean m:
+
+        min_c C_p(c) + beta |c - m| = min( min_{c <= floor m} [C_p(c) - beta c] + beta m,
+                                           min_{c >= ceil m}  [C_p(c) + beta c] - beta m ),
+
+        the lower envelope of the cost under an L1 cone (a 1-D distance transform).
+        ``below[k]`` = argmin over c <= k + 1 of C_p(c) - beta c, ``above[k]`` = argmin over
+        c >= k + 1 of C_p(c) + beta c (ties: the smallest c), and ``cost_mean`` = mean_c C_p.
+        """
+        C = self.C
+        for y, x in cost_mean:
+            total = ti.cast(0.0, ti.f64)
+            best = 1e30
+            arg = 1
+            for k in range(C):
+                v = cost[y, x, k]
+                total += v
+                g = v - beta * (k + 1)
+                if g < best:
+                    best = g
+                    arg = k + 1
+                below[y, x, k] = ti.cast(arg, below.dtype)
+            cost_mean[y, x] = ti.cast(total / C, ti.f32)
+            best = 1e30
+            arg = C
+            for j in range(C):
+                k = C - 1 - j
+                g = cost[y, x, k] + beta * (k + 1)
+                if g <= best:
+                    best = g
+                    arg = k + 1
+                above[y, x, k] = ti.cast(arg, above.dtype)
+
+    @ti.kernel
+    def _messages_envelope(self, cost: ti.template(), cost_mean: ti.template(),
+                           below: ti.template(), above: ti.template(), env_key: ti.template(),
+                           env_arg: ti.template(), env_cost: ti.template(),
+                           count: ti.template(), d_sum: ti.template(), phi_max: ti.template(),
+                           phi_plus_min: ti.template(), d_p: ti.template(),
+                           sigma_p: ti.template(), valid: ti.template(), relay: ti.template(),
+                           beta: ti.f32, use_validity: ti.i32):
+        """Eq. 4 and Eq. 5 with the prior, in O(1) per patch from the envelope: d_p and
+        sigma_p of the full scan of C_p(c) + beta |c - m| (up to float rounding of near-ties).
+        The two candidates are cached per patch and re-read from the volumes only where
+        (floor m, ceil m) moved since the last call, so an iteration streams 2-D fields."""
         C = self.C
         for y, x in d_p:
             w = 1
             if use_validity:
-                fg = phi_max[y, x] > 0
-                vis = phi_plus_min[y, x] < 0
-                w = 1 if fg != vis else 0  # Eq. 4: XOR
+                w = 1 if (phi_max[y, x] > 0) != (phi_plus_min[y, x] < 0) else 0   # Eq. 4
             valid[y, x] = w
             a = 0.0
             b = 0.0
             if w == 1:
-                d_mean = d_sum[y, x] / ti.max(count[y, x], 1)
-                lam = beta if use_prior else 0.0
+                m = ti.min(ti.max(d_sum[y, x] / ti.max(count[y, x], 1), 0.0),
+                           ti.cast(C, ti.f32))
+                lo = ti.cast(ti.floor(m), ti.i32)          # candidates c <= lo ...
+                hi = ti.max(ti.cast(ti.ceil(m), ti.i32), 1)  # ... and c >= hi
+                key = 2 * lo + 1 + ti.cast(hi == lo, ti.i32)
+                if env_key[y, x] != key:
+                    c_lo = 0
+                    c_hi = 0
+                    if lo >= 1:
+                        c_lo = ti.cast(below[y, x, lo - 1], ti.i32)
+                    if hi <= C:
+                        c_hi = ti.cast(above[y, x, hi - 1], ti.i32)
+                    env_arg[y, x] = ti.Vector([c_lo, c_hi])
+                    env_cost[y, x] = ti.Vector([cost[y, x, ti.max(c_lo, 1) - 1],
+                                                cost[y, x, ti.max(c_hi, 1) - 1]])
+                    env_key[y, x] = key
+                ca = env_arg[y, x]
+                cv = env_cost[y, x]
                 best = 1e30
                 arg = 1
-                total = 0.0
-                for k in range(C):
-                    v = cost[y, x, k] + lam * ti.abs(ti.cast(k + 1, ti.f32) - d_mean)
-                    total += v
+                if ca[0] >= 1:
+                    best = cv[0] + beta * (m - ca[0])
+                    arg = ca[0]
+                if ca[1] >= 1:
+                    v = cv[1] + beta * (ca[1] - m)
                     if v < best:
                         best = v
-                        arg = k + 1
-                spread = total / C - best
-                sigma = ti.cast(C, ti.f32) / (spread + 1e-8)
+                        arg = ca[1]
+                # mean over c of beta |c - m|, in closed form
+                f = ti.cast(lo, ti.f32)
+                cf = ti.cast(C, ti.f32)
+                l1 = f * m - 0.5 * f * (f + 1.0) + 0.5 * (cf * (cf + 1.0) - f * (f + 1.0)) \
+                    - (cf - f) * m
+                spread = cost_mean[y, x] + beta * l1 / cf - best
+                sigma = cf / (spread + 1e-8)
                 d_p[y, x] = arg
                 sigma_p[y, x] = sigma
                 a = 1.0 / (sigma * sigma)
@@ -256,11 +357,32 @@ class PatchHierarchy:
             relay[y, x, 1] = b
 
     def messages(self, beta, use_prior, use_validity):
-        """Per-patch (d_p, sigma_p) and w_p at every level; seeds the downward relays."""
+        """Per-patch (d_p, sigma_p) and w_p at every level; seeds the downward relays.
+
+        With the prior (every iteration after the first), the messages come in O(1) per patch
+        from the lower envelope of each patch's cost (built once per ``beta``, O(c_max) per
+        patch), with validity from Eq. 4 if ``use_validity``; without it (the first
+        iteration), from a scan of the cost curve with every patch valid."""
+        beta = float(beta)
+        if not use_prior and use_validity:
+            raise ValueError("messages: validity needs the prior (iteration >= 2)")
+        if use_prior and self._envelope_beta != beta:
+            for i in range(len(self.levels)):
+                self._build_envelope(self.cost[i], self.cost_mean[i], self.arg_below[i],
+                                     self.arg_above[i], beta)
+                self.env_key[i].fill(0)
+            self._envelope_beta = beta
         for i in range(len(self.levels)):
-            self._messages(self.cost[i], self.count[i], self.d_sum[i], self.phi_max[i],
-                           self.phi_plus_min[i], self.d_p[i], self.sigma_p[i], self.valid[i],
-                           self.relay[i], float(beta), int(use_prior), int(use_validity))
+            if use_prior:
+                self._messages_envelope(self.cost[i], self.cost_mean[i], self.arg_below[i],
+                                        self.arg_above[i], self.env_key[i], self.env_arg[i],
+                                        self.env_cost[i], self.count[i], self.d_sum[i],
+                                        self.phi_max[i], self.phi_plus_min[i], self.d_p[i],
+                                        self.sigma_p[i], self.valid[i], self.relay[i], beta,
+                                        int(use_validity))
+            else:
+                self._messages(self.cost[i], self.d_p[i], self.sigma_p[i], self.valid[i],
+                               self.relay[i])
 
     # ------------------------------------------------------------------ downward (Eq. 7)
     @ti.kernel

@@ -121,12 +121,40 @@ def test_messages_validity_and_consensus_match_reference(hierarchy):
     pool.destroy()
 
 
+@pytest.mark.parametrize("d_value", [0.0, 1.0, 3.0, 3.5, float(C), "random-integers"])
+def test_envelope_messages_match_scan_at_integer_and_extreme_means(hierarchy, d_value):
+    """The O(1) envelope messages equal the full scan of Eq. 5 where the prior mean sits on
+    an integer candidate, below the first one (0) and on the last one (c_max)."""
+    rng = np.random.default_rng(8)
+    if d_value == "random-integers":
+        D = rng.integers(0, C + 1, size=(H, W)).astype(np.float64)
+    else:
+        D = np.full((H, W), d_value)
+    ones = np.ones((H, W))
+    pool, (fD, fphi, fplus) = _field([D, ones, ones])   # fg and occluded everywhere: valid
+    hierarchy.upward(fD, fphi, fplus)
+    beta = 0.4 * 3 / C    # a strong prior, so that it moves many argmins
+    hierarchy.messages(beta, True, True)
+    for level, s in enumerate(SIZES):
+        assert hierarchy.valid[level].to_numpy().all()
+        cost = _inside(hierarchy, hierarchy.cost[level], level).astype(np.float64)
+        d_p, sigma_p = ref.patch_messages(cost, ref.box_mean(D.astype(np.float32), s), beta)
+        got_d = hierarchy.d_p[level].to_numpy()
+        assert np.mean(got_d == d_p) > 0.99
+        same = got_d == d_p
+        np.testing.assert_allclose(hierarchy.sigma_p[level].to_numpy()[same], sigma_p[same],
+                                   rtol=1e-4)
+    pool.destroy()
+
+
 def test_first_iteration_messages_ignore_prior_and_validity(hierarchy):
     rng = np.random.default_rng(6)
     pool, (fD, fphi, fplus) = _field([rng.random((H, W)) * C, -np.ones((H, W)),
                                       np.ones((H, W))])
     hierarchy.upward(fD, fphi, fplus)   # every patch would be invalid under Eq. 4
     hierarchy.messages(10.0, False, False)
+    with pytest.raises(ValueError, match="validity needs the prior"):
+        hierarchy.messages(10.0, False, True)
     for level in range(len(SIZES)):
         assert hierarchy.valid[level].to_numpy().all()
         cost = _inside(hierarchy, hierarchy.cost[level], level)
