@@ -132,47 +132,80 @@ class LevelSet:
         return ti.min(ti.max(j, 0), n - 1)
 
     @ti.func
-    def _conv(self, src: ti.template(), y, x, axis: ti.template(), order: ti.template()):
-        """Convolution of ``src`` along ``axis`` with the Gaussian derivative of ``order``
-        at (y, x); the taps are compile-time constants."""
-        s = 0.0
-        for i in ti.static(range(-self.half, self.half + 1)):
-            w = ti.static(float(self.tap_values[order][i + self.half]))
-            if ti.static(axis == 1):
-                s += w * src[y, self._reflect(x - i, self.W)]
+    def _filters(self, src: ti.template(), y, x, axis: ti.template(), orders: ti.template()):
+        """Convolutions of ``src`` along ``axis`` (0: y, 1: x) with the Gaussian derivatives
+        of ``orders`` at (y, x), as a vector.  The taps are compile-time constants, even
+        (orders 0, 2) or odd (order 1), so each pair of samples at +-i is read once for all
+        orders; pixels farther than the half-width from the border skip the reflection."""
+        out = ti.Vector.zero(ti.f32, ti.static(len(orders)))
+        centre = src[y, x]
+        for j in ti.static(range(len(orders))):
+            out[j] = ti.static(float(self.tap_values[orders[j]][self.half])) * centre
+        n = ti.static(self.W if axis == 1 else self.H)
+        pos = x if ti.static(axis == 1) else y
+        if self.half <= pos < n - self.half:
+            for i in ti.static(range(1, self.half + 1)):
+                if ti.static(axis == 1):
+                    out = self._pair(out, src[y, x - i], src[y, x + i], i, orders)
+                else:
+                    out = self._pair(out, src[y - i, x], src[y + i, x], i, orders)
+        else:
+            for i in ti.static(range(1, self.half + 1)):
+                if ti.static(axis == 1):
+                    out = self._pair(out, src[y, self._reflect(x - i, n)],
+                                     src[y, self._reflect(x + i, n)], i, orders)
+                else:
+                    out = self._pair(out, src[self._reflect(y - i, n), x],
+                                     src[self._reflect(y + i, n), x], i, orders)
+        return out
+
+    @ti.func
+    def _pair(self, out, before, after, i: ti.template(), orders: ti.template()):
+        """Add taps +-i: w_i (before + after) for the even orders, w_i (before - after) for
+        the odd one (``before`` = src at pos - i, ``after`` at pos + i)."""
+        even = before + after
+        odd = before - after
+        for j in ti.static(range(len(orders))):
+            w = ti.static(float(self.tap_values[orders[j]][self.half + i]))
+            if ti.static(orders[j] == 1):
+                out[j] += w * odd
             else:
-                s += w * src[self._reflect(y - i, self.H), x]
-        return s
+                out[j] += w * even
+        return out
 
     @ti.kernel
     def _rows3(self, src: ti.template()):
         """Along x: orders 0, 1, 2 of src into the three scratch fields."""
         for y, x in src:
-            self._t0[y, x] = self._conv(src, y, x, 1, 0)
-            self._t1[y, x] = self._conv(src, y, x, 1, 1)
-            self._t2[y, x] = self._conv(src, y, x, 1, 2)
+            v = self._filters(src, y, x, 1, (0, 1, 2))
+            self._t0[y, x] = v[0]
+            self._t1[y, x] = v[1]
+            self._t2[y, x] = v[2]
 
     @ti.kernel
     def _columns5(self):
         """Along y: the five derivatives of phi from the row-filtered scratch fields."""
         for y, x in self.phi:
-            self.phi_x[y, x] = self._conv(self._t1, y, x, 0, 0)
-            self.phi_y[y, x] = self._conv(self._t0, y, x, 0, 1)
-            self.phi_xx[y, x] = self._conv(self._t2, y, x, 0, 0)
-            self.phi_yy[y, x] = self._conv(self._t0, y, x, 0, 2)
-            self.phi_xy[y, x] = self._conv(self._t1, y, x, 0, 1)
+            v0 = self._filters(self._t0, y, x, 0, (1, 2))
+            v1 = self._filters(self._t1, y, x, 0, (0, 1))
+            self.phi_x[y, x] = v1[0]
+            self.phi_y[y, x] = v0[0]
+            self.phi_xx[y, x] = self._filters(self._t2, y, x, 0, (0,))[0]
+            self.phi_yy[y, x] = v0[1]
+            self.phi_xy[y, x] = v1[1]
 
     @ti.kernel
     def _rows2(self, src: ti.template()):
         for y, x in src:
-            self._t0[y, x] = self._conv(src, y, x, 1, 0)
-            self._t1[y, x] = self._conv(src, y, x, 1, 1)
+            v = self._filters(src, y, x, 1, (0, 1))
+            self._t0[y, x] = v[0]
+            self._t1[y, x] = v[1]
 
     @ti.kernel
     def _columns2(self, gx: ti.template(), gy: ti.template()):
         for y, x in gx:
-            gx[y, x] = self._conv(self._t1, y, x, 0, 0)
-            gy[y, x] = self._conv(self._t0, y, x, 0, 1)
+            gx[y, x] = self._filters(self._t1, y, x, 0, (0,))[0]
+            gy[y, x] = self._filters(self._t0, y, x, 0, (1,))[0]
 
     def gradient(self, src, gx, gy):
         """Gaussian-derivative gradient of an ``(H, W)`` field."""
