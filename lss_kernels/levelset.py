@@ -25,20 +25,9 @@ from .distance import INF, DistanceTransform
 __all__ = ["LevelSet", "median_network"]
 
 
-def median_network(n):
-    """A selection network for the median of ``n`` values.
-
-    Batcher's odd-even merge sort over the next power of two ``size >= n``, with ``n_low``
-    copies of -inf and ``size - n - n_low`` of +inf as padding so that sorted position
-    ``index`` holds the median; then pruned: comparators whose inputs are known padding do
-    nothing, and comparators that cannot reach ``index`` are dropped.  Returns
-    ``(ops, size, n_low, index, pairs)``: ``ops`` lists ``(a, b, keep_min, keep_max)`` (position
-    ``a`` receives the minimum, ``b`` the maximum, each only if still needed) and ``pairs`` is
-    the unpruned sorting network (for tests).
-    """
-    size = 1
-    while size < n:
-        size *= 2
+def _batcher(size, block=1):
+    """Comparator pairs of Batcher's odd-even merge sort of ``size`` (a power of two) values,
+    omitting the sorts of the first ``block``-long runs (taken as already sorted)."""
     pairs = []
 
     def merge(lo, length, step):
@@ -52,34 +41,89 @@ def median_network(n):
             pairs.append((lo, lo + step))
 
     def sort(lo, length):
-        if length > 1:
+        if length > block:
             half = length // 2
             sort(lo, half)
             sort(lo + half, half)
             merge(lo, length, 1)
 
     sort(0, size)
-    n_low = (size - n) // 2
-    index = n_low + (n - 1) // 2
-    # symbolic pass: padding positions are known constants
-    kind = ["lo"] * n_low + ["var"] * n + ["hi"] * (size - n - n_low)
-    live = []
-    for a, b in pairs:
-        if kind[a] == "lo" or kind[b] == "hi":
-            continue                      # already in order
-        if kind[a] == "hi" or kind[b] == "lo":
-            raise AssertionError("a sorting network never moves padding inwards")
-        live.append((a, b))
-    # backward pass: keep what the median depends on
-    needed = {index}
+    return pairs
+
+
+def _next_pow2(n):
+    size = 1
+    while size < n:
+        size *= 2
+    return size
+
+
+def _resolve_padding(slots, pairs):
+    """Run ``pairs`` symbolically over ``slots`` (``"lo"`` = -inf, ``"hi"`` = +inf, anything
+    else a value): comparators with a padding input become no-ops or fixed swaps.  Returns
+    the ops ``("cmp", a, b)`` / ``("swap", a, b)`` and the final slot contents."""
+    cur = list(slots)
     ops = []
-    for a, b in reversed(live):
+    for a, b in pairs:
+        ka, kb = cur[a], cur[b]
+        if ka == "lo" or kb == "hi":
+            continue                                   # already in order
+        if ka == "hi" or kb == "lo":
+            cur[a], cur[b] = kb, ka                    # known outcome: a swap
+            ops.append(("swap", a, b))
+            continue
+        ops.append(("cmp", a, b))
+    return ops, cur
+
+
+def _prune(ops, index):
+    """Keep only what position ``index`` depends on; ``("cmp", a, b, keep_min, keep_max)``."""
+    needed = {index}
+    kept = []
+    for op, a, b in reversed(ops):
+        if op == "swap":
+            if a in needed or b in needed:
+                kept.append((op, a, b, True, True))
+                na, nb = b in needed, a in needed
+                needed -= {a, b}
+                needed |= ({a} if na else set()) | ({b} if nb else set())
+            continue
         keep_min, keep_max = a in needed, b in needed
         if keep_min or keep_max:
-            ops.append((a, b, keep_min, keep_max))
+            kept.append((op, a, b, keep_min, keep_max))
             needed |= {a, b}
-    ops.reverse()
-    return ops, size, n_low, index, pairs
+    return kept[::-1]
+
+
+def median_network(k):
+    """A selection network for the median of a ``k x k`` window (``k`` odd), in two stages.
+
+    1. ``column_ops``: sort each window column of ``k`` values (Batcher over the next power
+       of two, the padding +inf, pruned) -- shared by every window that contains the column.
+    2. ``ops``: merge the ``k`` sorted columns (each padded to ``block`` slots) with the
+       merge stages of Batcher's odd-even merge sort, pruned to what the middle rank needs.
+
+    ``slots`` gives the initial content of each of the ``size`` positions of stage 2:
+    ``("lo")``/``("hi")`` padding or ``(column, rank)``; the median ends at ``index``.  Ops
+    are ``(op, a, b, keep_min, keep_max)`` with ``op`` ``"cmp"`` (position ``a`` gets the
+    minimum, ``b`` the maximum, each only if still needed) or ``"swap"`` (a comparator whose
+    outcome padding decides).  Returns ``(column_ops, slots, ops, index)``.
+    """
+    block = _next_pow2(k)
+    column_ops, _ = _resolve_padding(list(range(k)) + ["hi"] * (block - k), _batcher(block))
+    column_ops = [(op, a, b, True, True) for op, a, b in column_ops]
+    size = _next_pow2(k * block)
+    n_low = (size - k * k) // 2
+    slots, lows = [], n_low
+    for col in range(size // block):
+        pads = block - k if col < k else block
+        n_lo = min(lows, pads)
+        lows -= n_lo
+        values = [(col, r) for r in range(k)] if col < k else []
+        slots += ["lo"] * n_lo + values + ["hi"] * (pads - n_lo)
+    index = n_low + (k * k - 1) // 2
+    ops, _ = _resolve_padding(slots, _batcher(size, block))
+    return column_ops, slots, _prune(ops, index), index
 
 
 @ti.data_oriented
@@ -107,6 +151,10 @@ class LevelSet:
         self.curvature_clip = float(params.curvature_clip)
         self.boundary_clip = float(params.boundary_clip)
         self.median_size = int(params.median_size)
+        if self.median_size > 1:
+            column_ops, slots, ops, index = median_network(self.median_size)
+            self._network = (tuple(column_ops), tuple(slots), tuple(ops), index)
+            self._columns = pool.vector(self.median_size, ti.f32, (H, W))
         self.scale = float(params.phi_scale)
         self._sd = pool.field(ti.f32, (H, W, 1))
         self._edt = None
@@ -276,29 +324,45 @@ class LevelSet:
             self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt)
 
     # ---------------------------------------------------------------- median, re-init
-    @ti.kernel
-    def _median(self, src: ti.template(), dst: ti.template(), k: ti.template(),
-                ops: ti.template(), size: ti.template(), n_low: ti.template(),
-                index: ti.template()):
-        for y, x in dst:
-            v = ti.Vector.zero(ti.f32, size)
-            for i in ti.static(range(size)):
-                if ti.static(i < n_low):
-                    v[i] = -1e30
-                elif ti.static(i >= n_low + k * k):
-                    v[i] = 1e30
-                else:
-                    dy = ti.static((i - n_low) // k - k // 2)
-                    dx = ti.static((i - n_low) % k - k // 2)
-                    v[i] = src[self._reflect(y + dy, self.H), self._reflect(x + dx, self.W)]
-            for a, b, keep_min, keep_max in ti.static(ops):
+    @ti.func
+    def _apply(self, v, ops: ti.template()):
+        for op, a, b, keep_min, keep_max in ti.static(ops):
+            if ti.static(op == "swap"):
+                v[a], v[b] = v[b], v[a]
+            else:
                 lo = ti.min(v[a], v[b])
                 hi = ti.max(v[a], v[b])
                 if ti.static(keep_min):
                     v[a] = lo
                 if ti.static(keep_max):
                     v[b] = hi
-            dst[y, x] = v[index]
+        return v
+
+    @ti.kernel
+    def _sort_columns(self, src: ti.template(), k: ti.template(), column_ops: ti.template()):
+        """Stage 1 of the median: each pixel's window column, sorted (symmetric borders)."""
+        for y, x in src:
+            v = ti.Vector.zero(ti.f32, k)
+            for r in ti.static(range(k)):
+                v[r] = src[self._reflect(y + r - k // 2, self.H), x]
+            self._columns[y, x] = self._apply(v, column_ops)
+
+    @ti.kernel
+    def _median_of_columns(self, dst: ti.template(), k: ti.template(), slots: ti.template(),
+                           ops: ti.template(), index: ti.template()):
+        """Stage 2: merge the k sorted columns of each window up to the middle rank."""
+        for y, x in dst:
+            cols = [self._columns[y, self._reflect(x + c - k // 2, self.W)]
+                    for c in ti.static(range(k))]
+            v = ti.Vector.zero(ti.f32, ti.static(len(slots)))
+            for i in ti.static(range(len(slots))):
+                if ti.static(slots[i] == "lo"):
+                    v[i] = -1e30
+                elif ti.static(slots[i] == "hi"):
+                    v[i] = 1e30
+                else:
+                    v[i] = cols[ti.static(slots[i][0])][ti.static(slots[i][1])]
+            dst[y, x] = self._apply(v, ops)[index]
 
     @ti.kernel
     def _copy(self, src: ti.template(), dst: ti.template()):
@@ -336,8 +400,9 @@ class LevelSet:
         if k == 1:
             self._copy(src, dst)
             return
-        ops, size, n_low, index, _ = median_network(k * k)
-        self._median(src, dst, k, tuple(ops), size, n_low, index)
+        column_ops, slots, ops, index = self._network
+        self._sort_columns(src, k, column_ops)
+        self._median_of_columns(dst, k, slots, ops, index)
 
     @ti.kernel
     def _count_flips(self, before: ti.template()):

@@ -247,29 +247,46 @@ def test_median_filter_matches_numpy(levelset):
     np.testing.assert_array_equal(levelset.phi.to_numpy(), ref.median_filter(a, 7))
 
 
-def test_median_network_sorts_and_its_pruned_form_selects_the_median():
-    from lss_kernels.levelset import median_network
+def _run_ops(v, ops):
+    for op, a, b, keep_min, keep_max in ops:
+        if op == "swap":
+            v[a], v[b] = v[b], v[a]
+            continue
+        lo, hi = min(v[a], v[b]), max(v[a], v[b])
+        if keep_min:
+            v[a] = lo
+        if keep_max:
+            v[b] = hi
+    return v
+
+
+@pytest.mark.parametrize("k", [3, 5, 7])
+def test_median_network_sorts_columns_then_selects_the_median(k):
+    from lss_kernels.levelset import _batcher, median_network
+    column_ops, slots, ops, index = median_network(k)
+    n_full = len(_batcher(len(slots)))
+    assert len(ops) + len(column_ops) < n_full / 2   # far fewer than sorting k*k values
     rng = np.random.default_rng(10)
-    for n in (9, 25, 49):
-        ops, size, n_low, index, pairs = median_network(n)
-        assert len(ops) < len(pairs)
-        for _ in range(50):
-            x = rng.standard_normal(n)
-            pad = lambda: np.concatenate([np.full(n_low, -np.inf), x,
-                                          np.full(size - n - n_low, np.inf)])
-            v = pad()
-            for a, b in pairs:
-                if v[a] > v[b]:
-                    v[a], v[b] = v[b], v[a]
-            assert np.all(v[:-1] <= v[1:])
-            v = pad()
-            for a, b, keep_min, keep_max in ops:
-                lo, hi = min(v[a], v[b]), max(v[a], v[b])
-                if keep_min:
-                    v[a] = lo
-                if keep_max:
-                    v[b] = hi
-            assert v[index] == np.median(x)
+    for trial in range(200):
+        window = rng.standard_normal((k, k))
+        if trial % 4 == 0:
+            window = np.round(window)                   # many ties
+        columns = []
+        for c in range(k):
+            col = _run_ops(list(window[:, c]), column_ops)
+            assert col[:k] == sorted(window[:, c])
+            columns.append(col)
+        v = [-np.inf if s == "lo" else np.inf if s == "hi" else columns[s[0]][s[1]]
+             for s in slots]
+        assert _run_ops(v, ops)[index] == np.median(window)
+
+
+def test_median_filter_matches_numpy_with_ties_and_borders(levelset):
+    rng = np.random.default_rng(12)
+    a = np.round(rng.standard_normal((H, W)) * 2).astype(np.float32)
+    levelset.phi_next.from_numpy(a)
+    levelset.median(levelset.phi_next, levelset.phi)
+    np.testing.assert_array_equal(levelset.phi.to_numpy(), ref.median_filter(a, 7))
 
 
 def test_derivatives_and_curvature_match_reference(levelset):
