@@ -391,6 +391,8 @@ def iteration(state: IterationState, params, taps=None):
 
     # shapes: Eq. 8/9 over the foreground and the visible background
     w = precision if p.shape_weight_power == 1 else precision * precision
+    # a consensus whose correspondence falls outside the other image is no evidence
+    w = np.where((x - mean < 0) | (x + mean > W - 1), 0.0, w)
     w_fg = np.where(phi >= 0, w, 0.0)
     w_bg = np.where((phi < 0) & (phi_plus < 0), w, 0.0)
     theta = np.array(state.theta, np.float64, copy=True)

@@ -189,6 +189,12 @@ class Solver:
             p = self.hierarchy.precision[y, x]
             w = p if power == 1 else p * p
             phi = self.levelset.phi[y, x]
+            # a consensus whose correspondence falls outside the other image (x - c < 0 or
+            # x + c > W - 1) is no evidence: its costs compare clamped border columns
+            c = self.hierarchy.consensus_mean[y, x]
+            xf = ti.cast(x, ti.f32)
+            if xf - c < 0.0 or xf + c > self.W - 1.0:
+                w = 0.0
             self.weight_fg[y, x] = w if phi >= 0 else 0.0
             self.weight_bg[y, x] = w if (phi < 0 and self.occ.phi_plus[y, x] < 0) else 0.0
 

@@ -91,3 +91,28 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     margins = sum(4 * ((H + 2 * k) * (W + 2 * k) - H * W) * solver.c_max for k in m)
     assert solver.memory_bytes <= budget + margins + 64 * H * W * 4
     solver.close()
+
+
+def test_shape_weights_drop_consensus_that_points_outside_the_other_image(ti_arch):
+    """Eq. 8 weights: precision^2 on the foreground / visible background, but zero where the
+    consensus correspondence x +- c leaves the image (costs there compare clamped borders)."""
+    scene = make_scene("easy")
+    solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse)
+    solver.step()
+    H, W = solver.H, solver.W
+    rng = np.random.default_rng(0)
+    mean = rng.uniform(0, solver.c_max, (H, W)).astype(np.float32)
+    prec = rng.uniform(0.5, 2.0, (H, W)).astype(np.float32)
+    solver.hierarchy.consensus_mean.from_numpy(mean)
+    solver.hierarchy.precision.from_numpy(prec)
+    solver._region_weights(2)
+    x = np.arange(W)[None, :]
+    inside = (x - mean >= 0) & (x + mean <= W - 1)
+    assert 0.05 < (~inside).mean() < 0.95
+    phi = solver.levelset.phi.to_numpy()
+    visible = (phi < 0) & (solver.occ.phi_plus.to_numpy() < 0)
+    np.testing.assert_allclose(solver.weight_fg.to_numpy(),
+                               np.where(inside & (phi >= 0), prec ** 2, 0.0), rtol=1e-6)
+    np.testing.assert_allclose(solver.weight_bg.to_numpy(),
+                               np.where(inside & visible, prec ** 2, 0.0), rtol=1e-6)
+    solver.close()
