@@ -304,6 +304,18 @@ def _write_table(path: Path, rows, names, methods, dataset_dir: Path) -> None:
     if paper:
         text += ["", "Paper columns: Table 1 of the paper; their mean F1 is over the scenes "
                  "above, their mean bad-4.0 is the paper's own average over its 15 scenes."]
+    for m in methods:
+        text += ["", f"## {m}, per scene", "",
+                 "| scene | occlusion F1 | precision | recall | bad-4.0 (%) | seconds | "
+                 "iterations |", "|---|---|---|---|---|---|---|"]
+        for name in names:
+            r = by_key[name, m]
+            text.append(f"| {name} | {r['occ_f1']:.2f} | {r['occ_precision']:.2f} | "
+                        f"{r['occ_recall']:.2f} | {r['bad4']:.1f} | {r['seconds']:.1f} | "
+                        f"{r.get('iterations', '–')} |")
+        text.append(f"| **mean** | {means[m]['occ_f1']:.3f} | {means[m]['occ_precision']:.2f} | "
+                    f"{means[m]['occ_recall']:.2f} | {means[m]['bad4']:.2f} | "
+                    f"{means[m]['seconds']:.1f} | |")
     path.write_text("\n".join(text) + "\n")
 
 

@@ -92,6 +92,13 @@ def test_table_md(evaluated):
     assert any(line.startswith("| **mean bad-4.0 (%)**") and line.endswith("| 17.57 | 16.07 |")
                for line in lines)
     assert any(line.startswith("| **seconds per scene**") for line in lines)
+    # a detail table per method: F1, precision, recall, bad-4.0, seconds, iterations
+    start = lines.index("## lss, per scene")
+    row_a = next(line for line in lines[start:] if line.startswith("| sceneA |"))
+    ra = next(r for r in rows if r["scene"] == "sceneA" and r["method"] == "lss")
+    assert row_a == (f"| sceneA | {ra['occ_f1']:.2f} | {ra['occ_precision']:.2f} | "
+                     f"{ra['occ_recall']:.2f} | {ra['bad4']:.1f} | {ra['seconds']:.1f} | "
+                     f"{ra['iterations']} |")
 
 
 def test_panels(evaluated):
