@@ -271,7 +271,7 @@ class PatchHierarchy:
         """
         C = self.C
         for y, x in cost_mean:
-            total = ti.cast(0.0, ti.f64)
+            total = 0.0
             best = 1e30
             arg = 1
             for k in range(C):
@@ -282,7 +282,7 @@ class PatchHierarchy:
                     best = g
                     arg = k + 1
                 below[y, x, k] = ti.cast(arg, below.dtype)
-            cost_mean[y, x] = ti.cast(total / C, ti.f32)
+            cost_mean[y, x] = total / C
             best = 1e30
             arg = C
             for j in range(C):
