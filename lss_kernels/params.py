@@ -47,6 +47,9 @@ class Params:
         ``stop_window`` iterations before are counted; stop when they are fewer than this
         fraction of the foreground area (an oscillating boundary does not count).
         0 disables the rule (run to ``max_iterations``).
+    stop_patience : int
+        Stop only after this many consecutive windows below ``stop_fraction`` (a boundary
+        that pauses for one window and then moves on is not converged).
     phi_scale : float
         phi is a signed distance (in pixels) times this factor (the release: 0.01).
     curvature_sigma : float
@@ -80,6 +83,7 @@ class Params:
     min_iterations: int = 200
     stop_window: int = 20
     stop_fraction: float = 0.001
+    stop_patience: int = 2
     phi_scale: float = 0.01
     curvature_sigma: float = 4.0
     curvature_clip: float = 10.0
@@ -119,6 +123,7 @@ class Params:
         need("min_iterations", lambda v: isinstance(v, int) and v >= 0, "an integer >= 0")
         need("stop_window", posint, "an integer >= 1")
         need("stop_fraction", lambda v: nonneg(v) and v < 1, "a number in [0, 1)")
+        need("stop_patience", posint, "an integer >= 1")
         need("phi_scale", pos, "a finite number > 0")
         need("curvature_sigma", lambda v: pos(v) and v <= 16, "a number in (0, 16]")
         need("curvature_clip", pos, "a finite number > 0")

@@ -148,6 +148,7 @@ class Solver:
         self.stop_reason = None
         self.history = []
         self._moving = 1.0
+        self._quiet = 0          # consecutive stop windows below params.stop_fraction
         self.levelset.net_change()
         self._t_loop = 0.0
         self.timings["setup_total"] = time.perf_counter() - t_start
@@ -260,6 +261,7 @@ class Solver:
         if self.iteration % p.stop_window == 0:
             ls.net_change()
             self._moving = int(ls.changed[None]) / max(area, 1)
+            self._quiet = self._quiet + 1 if self._moving < p.stop_fraction else 0
         moving = self._moving
         stats = dict(iteration=self.iteration, flipped=flipped, moving_fraction=moving,
                      fg_fraction=area / float(self.H * self.W), seconds=seconds)
@@ -274,10 +276,11 @@ class Solver:
         elif area == self.H * self.W:
             self.stop_reason = f"foreground filled the image at iteration {self.iteration}"
         elif (p.stop_fraction > 0 and self.iteration >= p.min_iterations
-              and self.iteration % p.stop_window == 0 and moving < p.stop_fraction):
+              and self.iteration % p.stop_window == 0 and self._quiet >= p.stop_patience):
             self.stop_reason = (f"converged at iteration {self.iteration}: the foreground "
                                 f"changed by {moving:.4f} of its area over the last "
-                                f"{p.stop_window} iterations (< {p.stop_fraction})")
+                                f"{p.stop_window} iterations (< {p.stop_fraction} in "
+                                f"{self._quiet} windows in a row)")
         elif self.iteration >= p.max_iterations:
             self.stop_reason = f"reached the iteration cap ({p.max_iterations})"
         self.done = self.stop_reason is not None

@@ -116,3 +116,14 @@ def test_shape_weights_drop_consensus_that_points_outside_the_other_image(ti_arc
     np.testing.assert_allclose(solver.weight_bg.to_numpy(),
                                np.where(inside & visible, prec ** 2, 0.0), rtol=1e-6)
     solver.close()
+
+
+@pytest.mark.parametrize("patience", [1, 3])
+def test_stopping_rule_waits_for_patience_quiet_windows(ti_arch, patience):
+    scene = make_scene("easy")
+    params = Params(stop_fraction=0.99, stop_window=5, stop_patience=patience,
+                    min_iterations=0)
+    result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=params)
+    assert result.iterations == 5 * patience
+    assert result.stop_reason.startswith(f"converged at iteration {5 * patience}")
+    assert f"{patience} windows in a row" in result.stop_reason
