@@ -70,10 +70,14 @@ class PatchHierarchy:
         Number of cyclopean disparities searched (``c = 1 .. c_max``).
     sizes : tuple of int
         Patch sides per level.
+    subpixel : bool
+        Refine each message's integer argmin to the vertex of a parabola (see
+        ``Params.subpixel_messages``).
     """
 
-    def __init__(self, pool, height, width, c_max, sizes):
+    def __init__(self, pool, height, width, c_max, sizes, subpixel=True):
         self.H, self.W, self.C = int(height), int(width), int(c_max)
+        self.subpixel = bool(subpixel)
         self.levels = level_geometry(sizes)
         H, W, C = self.H, self.W, self.C
 
@@ -104,6 +108,7 @@ class PatchHierarchy:
         self.env_key = [pool.field(ti.i32, (H, W)) for _ in self.levels]
         self.env_arg = [pool.vector(2, ti.i32, (H, W)) for _ in self.levels]
         self.env_cost = [pool.vector(2, ti.f32, (H, W)) for _ in self.levels]
+        self.env_refined = [pool.vector(2, ti.f32, (H, W)) for _ in self.levels]
         self._envelope_beta = None
         # downward relays of (w / sigma^2, w d / sigma^2)
         self.relay = [padded(lev, 2) for lev in self.levels]
@@ -233,6 +238,23 @@ class PatchHierarchy:
                                    self.phi_plus_min[i], self.levels[i].offsets)
 
     # ------------------------------------------------------------------ messages (Eq. 4, 5)
+    @ti.func
+    def _refine(self, cost: ti.template(), y, x, arg):
+        """d_p below the integer grid (Eq. 5 takes the argmin over a continuous d): the
+        vertex of the parabola through C_p at ``arg - 1``, ``arg``, ``arg + 1``, kept within
+        half a step; ``arg`` itself at the ends of the range, where the three are not convex,
+        or with ``subpixel`` off."""
+        r = ti.cast(arg, ti.f32)
+        if ti.static(self.subpixel):
+            if 1 < arg < self.C:
+                cm = cost[y, x, arg - 2]
+                c0 = cost[y, x, arg - 1]
+                cp = cost[y, x, arg]
+                den = cm - 2.0 * c0 + cp
+                if den > 1e-12:
+                    r += ti.min(ti.max(0.5 * (cm - cp) / den, -0.5), 0.5)
+        return r
+
     @ti.kernel
     def _messages(self, cost: ti.template(), d_p: ti.template(), sigma_p: ti.template(),
                   valid: ti.template(), relay: ti.template()):
@@ -251,11 +273,12 @@ class PatchHierarchy:
                     best = v
                     arg = k + 1
             sigma = ti.cast(C, ti.f32) / (total / C - best + 1e-8)
-            d_p[y, x] = arg
+            r = self._refine(cost, y, x, arg)
+            d_p[y, x] = r
             sigma_p[y, x] = sigma
             a = 1.0 / (sigma * sigma)
             relay[y, x, 0] = a
-            relay[y, x, 1] = a * arg
+            relay[y, x, 1] = a * r
 
     @ti.kernel
     def _build_envelope(self, cost: ti.template(), cost_mean: ti.template(),
@@ -297,6 +320,7 @@ class PatchHierarchy:
     def _messages_envelope(self, cost: ti.template(), cost_mean: ti.template(),
                            below: ti.template(), above: ti.template(), env_key: ti.template(),
                            env_arg: ti.template(), env_cost: ti.template(),
+                           env_refined: ti.template(),
                            count: ti.template(), d_sum: ti.template(), phi_max: ti.template(),
                            phi_plus_min: ti.template(), d_p: ti.template(),
                            sigma_p: ti.template(), valid: ti.template(), relay: ti.template(),
@@ -329,19 +353,24 @@ class PatchHierarchy:
                     env_arg[y, x] = ti.Vector([c_lo, c_hi])
                     env_cost[y, x] = ti.Vector([cost[y, x, ti.max(c_lo, 1) - 1],
                                                 cost[y, x, ti.max(c_hi, 1) - 1]])
+                    env_refined[y, x] = ti.Vector([self._refine(cost, y, x, ti.max(c_lo, 1)),
+                                                   self._refine(cost, y, x, ti.max(c_hi, 1))])
                     env_key[y, x] = key
                 ca = env_arg[y, x]
                 cv = env_cost[y, x]
                 best = 1e30
                 arg = 1
+                refined = 1.0
                 if ca[0] >= 1:
                     best = cv[0] + beta * (m - ca[0])
                     arg = ca[0]
+                    refined = env_refined[y, x][0]
                 if ca[1] >= 1:
                     v = cv[1] + beta * (ca[1] - m)
                     if v < best:
                         best = v
                         arg = ca[1]
+                        refined = env_refined[y, x][1]
                 # mean over c of beta |c - m|, in closed form
                 f = ti.cast(lo, ti.f32)
                 cf = ti.cast(C, ti.f32)
@@ -349,10 +378,10 @@ class PatchHierarchy:
                     - (cf - f) * m
                 spread = cost_mean[y, x] + beta * l1 / cf - best
                 sigma = cf / (spread + 1e-8)
-                d_p[y, x] = arg
+                d_p[y, x] = refined
                 sigma_p[y, x] = sigma
                 a = 1.0 / (sigma * sigma)
-                b = a * arg
+                b = a * refined
             relay[y, x, 0] = a
             relay[y, x, 1] = b
 
@@ -376,7 +405,8 @@ class PatchHierarchy:
             if use_prior:
                 self._messages_envelope(self.cost[i], self.cost_mean[i], self.arg_below[i],
                                         self.arg_above[i], self.env_key[i], self.env_arg[i],
-                                        self.env_cost[i], self.count[i], self.d_sum[i],
+                                        self.env_cost[i], self.env_refined[i], self.count[i],
+                                        self.d_sum[i],
                                         self.phi_max[i], self.phi_plus_min[i], self.d_p[i],
                                         self.sigma_p[i], self.valid[i], self.relay[i], beta,
                                         int(use_validity))

@@ -375,10 +375,12 @@ def iteration(state: IterationState, params, taps=None):
     # messages: Eq. 4 and Eq. 5
     if first:
         valid = [np.ones((H, W), bool) for _ in sizes]
-        msgs = [patch_messages(cost, np.zeros((H, W)), 0.0) for cost in state.costs]
+        msgs = [patch_messages(cost, np.zeros((H, W)), 0.0, p.subpixel_messages)
+                for cost in state.costs]
     else:
         valid = [(mx > 0) != (mn < 0) for mx, mn in zip(phi_max, phi_plus_min)]
-        msgs = [patch_messages(cost, dm, p.beta / C) for cost, dm in zip(state.costs, d_mean)]
+        msgs = [patch_messages(cost, dm, p.beta / C, p.subpixel_messages)
+                for cost, dm in zip(state.costs, d_mean)]
     d_p = [m[0] for m in msgs]
     sigma_p = [m[1] for m in msgs]
     now = time.perf_counter()

@@ -68,6 +68,12 @@ class Params:
     shape_weight_power : int
         Rows of the least-squares fit of Theta are weighted by (1 / sigma^2) ** power:
         1 is Eq. 9 of the paper, 2 is what the release does.
+    subpixel_messages : bool
+        Eq. 5 takes d_p as an argmin over a continuous d: True refines the integer argmin to
+        the vertex of the parabola through the patch cost at it and its two neighbours
+        (within half a step).  False: the integer argmin of the authors' release (left-view
+        disparities quantised to even values, which biases Theta by a fraction of a pixel
+        and pulls the boundary inwards).
     """
 
     dt: float = 0.2
@@ -92,6 +98,7 @@ class Params:
     occ_threshold: float = 0.02
     mono_threshold: float = 0.08
     shape_weight_power: int = 2
+    subpixel_messages: bool = True
 
     def __post_init__(self):
         self.validate()
@@ -132,6 +139,9 @@ class Params:
         need("occ_threshold", pos, "a finite number > 0")
         need("mono_threshold", pos, "a finite number > 0")
         need("shape_weight_power", lambda v: v in (1, 2), "1 (the paper) or 2 (the release)")
+        if not isinstance(self.subpixel_messages, bool):
+            raise ValueError(f"params.subpixel_messages: expected True or False, got "
+                             f"{self.subpixel_messages!r}")
 
     def replace(self, **changes) -> "Params":
         """A copy with some fields changed (validated)."""

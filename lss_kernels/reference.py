@@ -56,18 +56,28 @@ def patch_costs(left, right, c_max, sizes):
     return out
 
 
-def patch_messages(cost, d_mean, beta, valid=None):
+def patch_messages(cost, d_mean, beta, subpixel=False):
     """Eq. 5: d_p = argmin_c C_p(c) + beta |c - <D>_p| and sigma_p = c_max / (mean - min).
 
     ``cost``: ``(H, W, c_max)``; ``d_mean``: ``(H, W)`` patch mean of D; returns
-    ``(d_p, sigma_p)`` (ties take the smallest c)."""
+    ``(d_p, sigma_p)`` (ties take the smallest c).  ``subpixel``: d_p moves to the vertex
+    of the parabola through the matching cost at the argmin and its two neighbours (within
+    half a step; not at the ends of the range, nor where the three are not convex)."""
     C = cost.shape[2]
     c = np.arange(1, C + 1, dtype=np.float64)
     total = cost + beta * np.abs(c[None, None, :] - np.asarray(d_mean)[..., None])
     k = np.argmin(total, axis=2)
     best = np.take_along_axis(total, k[..., None], axis=2)[..., 0]
     sigma = C / (total.mean(axis=2) - best + 1e-8)
-    return (k + 1).astype(np.float64), sigma
+    d_p = (k + 1).astype(np.float64)
+    if subpixel:
+        inner = (k > 0) & (k < C - 1)
+        at = lambda j: np.take_along_axis(cost, np.clip(j, 0, C - 1)[..., None], axis=2)[..., 0]
+        cm, c0, cp = at(k - 1), at(k), at(k + 1)
+        den = cm - 2.0 * c0 + cp
+        ok = inner & (den > 1e-12)
+        d_p += np.where(ok, np.clip(0.5 * (cm - cp) / np.where(ok, den, 1.0), -0.5, 0.5), 0.0)
+    return d_p, sigma
 
 
 def consensus(d_p, sigma_p, valid, sizes):

@@ -121,7 +121,8 @@ class Solver:
         self.pool = pool
         self.left = pool.vector(3, ti.f32, (H, W))
         self.right = pool.vector(3, ti.f32, (H, W))
-        self.hierarchy = PatchHierarchy(pool, H, W, C, self.params.patch_sizes)
+        self.hierarchy = PatchHierarchy(pool, H, W, C, self.params.patch_sizes,
+                                        self.params.subpixel_messages)
         self.costs = BoundaryCosts(pool, H, W, C)
         self.shapes = GlobalShapes(pool, H, W)
         self.occ = OcclusionGeometry(pool, H, W, C)
