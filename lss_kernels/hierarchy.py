@@ -25,6 +25,15 @@ import taichi as ti
 __all__ = ["Level", "PatchHierarchy", "level_geometry"]
 
 
+def _index_type(c_max):
+    """Smallest integer type for 1 .. c_max where the backend stores 8/16-bit fields natively
+    (CPU, CUDA); 32-bit elsewhere (Vulkan, Metal and OpenGL need optional device features
+    for narrow integers)."""
+    if ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64, ti.cuda):
+        return ti.u8 if c_max <= 255 else ti.u16
+    return ti.i32
+
+
 class Level:
     """Geometry of one level: patch side ``size``, the offsets of its children's centres
     (one axis; the children are the product of these offsets in y and x), and ``margin``, the
@@ -99,7 +108,7 @@ class PatchHierarchy:
         # the lower envelope of C_p(c) + beta |c - m| over m (see ``_build_envelope``): per
         # patch, the mean cost and, per candidate index k, the argmin over c <= k + 1 of
         # C_p(c) - beta c and over c >= k + 1 of C_p(c) + beta c
-        arg_type = ti.u8 if C <= 255 else ti.u16
+        arg_type = _index_type(C)
         self.cost_mean = [pool.field(ti.f32, (H, W)) for _ in self.levels]
         self.arg_below = [pool.field(arg_type, (H, W, C)) for _ in self.levels]
         self.arg_above = [pool.field(arg_type, (H, W, C)) for _ in self.levels]
