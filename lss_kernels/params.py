@@ -88,7 +88,7 @@ class Params:
     max_iterations: int = 1500
     min_iterations: int = 200
     stop_window: int = 20
-    stop_fraction: float = 0.001
+    stop_fraction: float = 0.002
     stop_patience: int = 2
     phi_scale: float = 0.01
     curvature_sigma: float = 4.0
