@@ -8,12 +8,15 @@ is the pixels).  Everything a patch needs is relayed between parents and childre
 * **upward**: the patch-mean matching cost C_p(c) (once, at set-up), the patch mean of the
   current disparity D, and the extremes of phi and phi(x + delta_theta) that decide the
   validity w_p (Eq. 4);
-* **messages**: d_p = argmin_c C_p(c) + beta |c - <D>_p| and sigma_p (Eq. 5);
+* **messages**: d_p = argmin_c C_p(c) + beta |c - <D>_p| and sigma_p (Eq. 5), in O(1) per
+  patch from the lower envelope of the cost under the L1 cone, refined below the integer grid
+  where the matching cost has a local minimum;
 * **downward**: every pixel receives the sums of w_p / sigma_p^2 and w_p d_p / sigma_p^2 over
   all patches that contain it (Eq. 7), relayed from parents to children.
 
 Frame: cyclopean, arrays ``(H, W)`` indexed ``[y, x]``; disparities are cyclopean (left-view
-disparity = 2 c), searched over integer ``c = 1 .. c_max`` (volume index ``k = c - 1``).
+disparity = 2 c); the cost volumes sample integer ``c = 1 .. c_max`` (volume index
+``k = c - 1``).
 Patches are centred on in-image pixels only; pixels outside the image contribute nothing
 (sums are over in-image pixels and means divide by the in-image count).  Intermediate levels
 carry a margin of patch centres outside the image because a parent near the border has
@@ -249,10 +252,11 @@ class PatchHierarchy:
     # ------------------------------------------------------------------ messages (Eq. 4, 5)
     @ti.func
     def _refine(self, cost: ti.template(), y, x, arg):
-        """d_p below the integer grid (Eq. 5 takes the argmin over a continuous d): the
-        vertex of the parabola through C_p at ``arg - 1``, ``arg``, ``arg + 1``, kept within
-        half a step; ``arg`` itself at the ends of the range, where the three are not convex,
-        or with ``subpixel`` off."""
+        """d_p below the integer grid (Eq. 5 takes the argmin over a continuous d): where the
+        matching cost C_p has a local minimum at ``arg``, the vertex of the parabola through
+        C_p at ``arg - 1``, ``arg``, ``arg + 1`` (it lies within half a step).  ``arg`` itself
+        at the ends of the range, on flat costs, where the prior beta |c - m| rather than the
+        matching cost put the minimum at ``arg``, or with ``subpixel`` off."""
         r = ti.cast(arg, ti.f32)
         if ti.static(self.subpixel):
             if 1 < arg < self.C:
@@ -260,7 +264,7 @@ class PatchHierarchy:
                 c0 = cost[y, x, arg - 1]
                 cp = cost[y, x, arg]
                 den = cm - 2.0 * c0 + cp
-                if den > 1e-12:
+                if c0 <= cm and c0 <= cp and den > 1e-12:
                     r += ti.min(ti.max(0.5 * (cm - cp) / den, -0.5), 0.5)
         return r
 

@@ -171,13 +171,12 @@ class LevelSet:
     # ---------------------------------------------------------------- helpers
     @ti.func
     def _reflect(self, i, n):
-        """Symmetric border: -1 -> 0, -2 -> 1, n -> n - 1 (as MATLAB's 'symmetric')."""
-        j = i
-        if j < 0:
-            j = -j - 1
+        """Symmetric border: -1 -> 0, -2 -> 1, n -> n - 1 (MATLAB's 'symmetric', numpy's
+        ``pad(mode="symmetric")``), repeated for offsets wider than the image."""
+        j = i % (2 * n)
         if j >= n:
-            j = 2 * n - j - 1
-        return ti.min(ti.max(j, 0), n - 1)
+            j = 2 * n - 1 - j
+        return j
 
     @ti.func
     def _filters(self, src: ti.template(), y, x, axis: ti.template(), orders: ti.template()):

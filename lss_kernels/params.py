@@ -49,7 +49,8 @@ class Params:
         0 disables the rule (run to ``max_iterations``).
     stop_patience : int
         Stop only after this many consecutive windows below ``stop_fraction`` (a boundary
-        that pauses for one window and then moves on is not converged).
+        that pauses for one window and then moves on is not converged).  Windows before
+        ``min_iterations`` count towards it: the rule can fire at ``min_iterations``.
     phi_scale : float
         phi is a signed distance (in pixels) times this factor (the release: 0.01).
     curvature_sigma : float

@@ -56,13 +56,13 @@ def patch_costs(left, right, c_max, sizes):
     return out
 
 
-def patch_messages(cost, d_mean, beta, subpixel=False):
+def patch_messages(cost, d_mean, beta, subpixel=True):
     """Eq. 5: d_p = argmin_c C_p(c) + beta |c - <D>_p| and sigma_p = c_max / (mean - min).
 
     ``cost``: ``(H, W, c_max)``; ``d_mean``: ``(H, W)`` patch mean of D; returns
-    ``(d_p, sigma_p)`` (ties take the smallest c).  ``subpixel``: d_p moves to the vertex
-    of the parabola through the matching cost at the argmin and its two neighbours (within
-    half a step; not at the ends of the range, nor where the three are not convex)."""
+    ``(d_p, sigma_p)`` (ties take the smallest c).  ``subpixel``: where the matching cost
+    has a local minimum at the argmin, d_p moves to the vertex of the parabola through it and
+    its two neighbours (not at the ends of the range, nor where the prior made the argmin)."""
     C = cost.shape[2]
     c = np.arange(1, C + 1, dtype=np.float64)
     total = cost + beta * np.abs(c[None, None, :] - np.asarray(d_mean)[..., None])
@@ -75,7 +75,7 @@ def patch_messages(cost, d_mean, beta, subpixel=False):
         at = lambda j: np.take_along_axis(cost, np.clip(j, 0, C - 1)[..., None], axis=2)[..., 0]
         cm, c0, cp = at(k - 1), at(k), at(k + 1)
         den = cm - 2.0 * c0 + cp
-        ok = inner & (den > 1e-12)
+        ok = inner & (c0 <= cm) & (c0 <= cp) & (den > 1e-12)
         d_p += np.where(ok, np.clip(0.5 * (cm - cp) / np.where(ok, den, 1.0), -0.5, 0.5), 0.0)
     return d_p, sigma
 

@@ -166,6 +166,35 @@ def test_first_iteration_messages_ignore_prior_and_validity(hierarchy):
     pool.destroy()
 
 
+def test_envelope_is_rebuilt_when_the_costs_change(pair):
+    """Same beta, new image pair: the cached envelope and candidates must not survive."""
+    from lss_kernels.hierarchy import PatchHierarchy
+    pool = FieldPool()
+    h = PatchHierarchy(pool, H, W, C, SIZES)
+    lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
+    pool.finalize()
+    D = np.full((H, W), 2.5)
+    ones = np.ones((H, W))
+    aux, (fD, fphi, fplus) = _field([D, ones, ones])
+    beta = 0.4 / C
+    rng = np.random.default_rng(14)
+    for trial in range(2):
+        left = pair[0] if trial == 0 else rng.random((H, W, 3)).astype(np.float32)
+        lf.from_numpy(left)
+        rf.from_numpy(pair[1])
+        h.build_costs(lf, rf)
+        h.upward(fD, fphi, fplus)
+        h.messages(beta, True, True)
+        for level, s in enumerate(SIZES):
+            cost = _inside(h, h.cost[level], level).astype(np.float64)
+            want, _ = ref.patch_messages(cost, ref.box_mean(D.astype(np.float32), s), beta,
+                                         subpixel=True)
+            same = np.isclose(h.d_p[level].to_numpy(), want, rtol=0, atol=1e-4)
+            assert same.mean() > 0.99
+    aux.destroy()
+    pool.destroy()
+
+
 def test_integer_messages_without_subpixel_refinement(pair):
     """``subpixel=False`` is the release's integer argmin (Eq. 5 over c = 1 .. c_max)."""
     from lss_kernels.hierarchy import PatchHierarchy
@@ -322,6 +351,46 @@ def test_derivatives_and_curvature_match_reference(levelset):
     k, nx, ny = ref.curvature(phi.astype(np.float64), 4.0, 10.0)
     np.testing.assert_allclose(levelset.kappa.to_numpy(), k, atol=2e-3)
     np.testing.assert_allclose(levelset.normal_x.to_numpy(), nx, atol=1e-4)
+
+
+def test_derivatives_inside_and_near_the_borders_of_a_larger_image(ti_arch):
+    """At 40 x 48 both filter passes take the interior fast path (farther than the
+    half-width 14 from the border) as well as the reflected border path."""
+    from lss_kernels.levelset import LevelSet
+    h, w = 40, 48
+    pool = FieldPool()
+    ls = LevelSet(pool, h, w, Params())
+    pool.finalize()
+    ls.setup()
+    rng = np.random.default_rng(13)
+    y, x = np.mgrid[0:h, 0:w]
+    phi = ((15.0 - np.hypot(x - 20.0, (y - 18.0) * 1.2)) / 10.0
+           + 0.05 * rng.standard_normal((h, w))).astype(np.float32)
+    ls.phi.from_numpy(phi)
+    ls.derivatives()
+    want = ref.gaussian_derivatives(phi.astype(np.float64), 4.0)
+    for got, wnt in zip((ls.phi_x, ls.phi_y, ls.phi_xx, ls.phi_yy, ls.phi_xy), want):
+        np.testing.assert_allclose(got.to_numpy(), wnt, atol=1e-5)
+    ls.destroy()
+    pool.destroy()
+
+
+def test_derivatives_of_an_image_smaller_than_the_filter(ti_arch):
+    """10 x 12 pixels under a half-width of 14: the symmetric border reflects repeatedly."""
+    from lss_kernels.levelset import LevelSet
+    h, w = 10, 12
+    pool = FieldPool()
+    ls = LevelSet(pool, h, w, Params())
+    pool.finalize()
+    ls.setup()
+    phi = np.random.default_rng(15).standard_normal((h, w)).astype(np.float32)
+    ls.phi.from_numpy(phi)
+    ls.derivatives()
+    want = ref.gaussian_derivatives(phi.astype(np.float64), 4.0)
+    for got, wnt in zip((ls.phi_x, ls.phi_y, ls.phi_xx, ls.phi_yy, ls.phi_xy), want):
+        np.testing.assert_allclose(got.to_numpy(), wnt, atol=1e-5)
+    ls.destroy()
+    pool.destroy()
 
 
 def test_curvature_of_a_disc_is_minus_one_over_radius(levelset):
