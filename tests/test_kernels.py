@@ -353,44 +353,34 @@ def test_derivatives_and_curvature_match_reference(levelset):
     np.testing.assert_allclose(levelset.normal_x.to_numpy(), nx, atol=1e-4)
 
 
-def test_derivatives_inside_and_near_the_borders_of_a_larger_image(ti_arch):
-    """At 40 x 48 both filter passes take the interior fast path (farther than the
-    half-width 14 from the border) as well as the reflected border path."""
+def _check_derivatives_at_size(phi):
+    """A fresh LevelSet of ``phi``'s size against reference.gaussian_derivatives."""
     from lss_kernels.levelset import LevelSet
-    h, w = 40, 48
     pool = FieldPool()
-    ls = LevelSet(pool, h, w, Params())
+    ls = LevelSet(pool, *phi.shape, Params())
     pool.finalize()
     ls.setup()
-    rng = np.random.default_rng(13)
-    y, x = np.mgrid[0:h, 0:w]
-    phi = ((15.0 - np.hypot(x - 20.0, (y - 18.0) * 1.2)) / 10.0
-           + 0.05 * rng.standard_normal((h, w))).astype(np.float32)
-    ls.phi.from_numpy(phi)
+    ls.phi.from_numpy(phi.astype(np.float32))
     ls.derivatives()
-    want = ref.gaussian_derivatives(phi.astype(np.float64), 4.0)
+    want = ref.gaussian_derivatives(phi.astype(np.float32).astype(np.float64), 4.0)
     for got, wnt in zip((ls.phi_x, ls.phi_y, ls.phi_xx, ls.phi_yy, ls.phi_xy), want):
         np.testing.assert_allclose(got.to_numpy(), wnt, atol=1e-5)
     ls.destroy()
     pool.destroy()
+
+
+def test_derivatives_inside_and_near_the_borders_of_a_larger_image(ti_arch):
+    """At 40 x 48 both filter passes take the interior fast path (farther than the
+    half-width 14 from the border) as well as the reflected border path."""
+    rng = np.random.default_rng(13)
+    y, x = np.mgrid[0:40, 0:48]
+    _check_derivatives_at_size((15.0 - np.hypot(x - 20.0, (y - 18.0) * 1.2)) / 10.0
+                               + 0.05 * rng.standard_normal((40, 48)))
 
 
 def test_derivatives_of_an_image_smaller_than_the_filter(ti_arch):
     """10 x 12 pixels under a half-width of 14: the symmetric border reflects repeatedly."""
-    from lss_kernels.levelset import LevelSet
-    h, w = 10, 12
-    pool = FieldPool()
-    ls = LevelSet(pool, h, w, Params())
-    pool.finalize()
-    ls.setup()
-    phi = np.random.default_rng(15).standard_normal((h, w)).astype(np.float32)
-    ls.phi.from_numpy(phi)
-    ls.derivatives()
-    want = ref.gaussian_derivatives(phi.astype(np.float64), 4.0)
-    for got, wnt in zip((ls.phi_x, ls.phi_y, ls.phi_xx, ls.phi_yy, ls.phi_xy), want):
-        np.testing.assert_allclose(got.to_numpy(), wnt, atol=1e-5)
-    ls.destroy()
-    pool.destroy()
+    _check_derivatives_at_size(np.random.default_rng(15).standard_normal((10, 12)))
 
 
 def test_curvature_of_a_disc_is_minus_one_over_radius(levelset):
