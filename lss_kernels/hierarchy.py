@@ -269,31 +269,6 @@ class PatchHierarchy:
         return r
 
     @ti.kernel
-    def _messages(self, cost: ti.template(), d_p: ti.template(), sigma_p: ti.template(),
-                  valid: ti.template(), relay: ti.template()):
-        """Eq. 5 without the prior (the first iteration): d_p = argmin_c C_p(c), every patch
-        valid."""
-        C = self.C
-        for y, x in d_p:
-            valid[y, x] = 1
-            best = 1e30
-            arg = 1
-            total = 0.0
-            for k in range(C):
-                v = cost[y, x, k]
-                total += v
-                if v < best:
-                    best = v
-                    arg = k + 1
-            sigma = ti.cast(C, ti.f32) / (total / C - best + 1e-8)
-            r = self._refine(cost, y, x, arg)
-            d_p[y, x] = r
-            sigma_p[y, x] = sigma
-            a = 1.0 / (sigma * sigma)
-            relay[y, x, 0] = a
-            relay[y, x, 1] = a * r
-
-    @ti.kernel
     def _build_envelope(self, cost: ti.template(), cost_mean: ti.template(),
                         below: ti.template(), above: ti.template(), beta: ti.f32):
         """Per patch, the running argmins that make Eq. 5 O(1) for any prior mean m:
@@ -338,8 +313,8 @@ class PatchHierarchy:
                            phi_plus_min: ti.template(), d_p: ti.template(),
                            sigma_p: ti.template(), valid: ti.template(), relay: ti.template(),
                            beta: ti.f32, use_validity: ti.i32):
-        """Eq. 4 and Eq. 5 with the prior, in O(1) per patch from the envelope: d_p and
-        sigma_p of the full scan of C_p(c) + beta |c - m| (up to float rounding of near-ties).
+        """Eq. 4 and Eq. 5 in O(1) per patch from the envelope: d_p and sigma_p of the full
+        scan of C_p(c) + beta |c - m| (up to float rounding of near-ties).
         The two candidates are cached per patch and re-read from the volumes only where
         (floor m, ceil m) moved since the last call, so an iteration streams 2-D fields."""
         C = self.C
@@ -401,31 +376,27 @@ class PatchHierarchy:
     def messages(self, beta, use_prior, use_validity):
         """Per-patch (d_p, sigma_p) and w_p at every level; seeds the downward relays.
 
-        With the prior (every iteration after the first), the messages come in O(1) per patch
-        from the lower envelope of each patch's cost (built once per ``beta``, O(c_max) per
-        patch), with validity from Eq. 4 if ``use_validity``; without it (the first
-        iteration), from a scan of the cost curve with every patch valid."""
-        beta = float(beta)
+        The messages come in O(1) per patch from the lower envelope of each patch's cost
+        (built once per prior weight, O(c_max) per patch), with validity from Eq. 4 if
+        ``use_validity``.  Without the prior (the first iteration) the weight is 0: the
+        envelope's two candidates then cover every c, so d_p is the plain argmin and every
+        patch is valid."""
+        beta = float(beta) if use_prior else 0.0
         if not use_prior and use_validity:
             raise ValueError("messages: validity needs the prior (iteration >= 2)")
-        if use_prior and self._envelope_beta != beta:
+        if self._envelope_beta != beta:
             for i in range(len(self.levels)):
                 self._build_envelope(self.cost[i], self.cost_mean[i], self.arg_below[i],
                                      self.arg_above[i], beta)
                 self.env_key[i].fill(0)
             self._envelope_beta = beta
         for i in range(len(self.levels)):
-            if use_prior:
-                self._messages_envelope(self.cost[i], self.cost_mean[i], self.arg_below[i],
-                                        self.arg_above[i], self.env_key[i], self.env_arg[i],
-                                        self.env_cost[i], self.env_refined[i], self.count[i],
-                                        self.d_sum[i],
-                                        self.phi_max[i], self.phi_plus_min[i], self.d_p[i],
-                                        self.sigma_p[i], self.valid[i], self.relay[i], beta,
-                                        int(use_validity))
-            else:
-                self._messages(self.cost[i], self.d_p[i], self.sigma_p[i], self.valid[i],
-                               self.relay[i])
+            self._messages_envelope(self.cost[i], self.cost_mean[i], self.arg_below[i],
+                                    self.arg_above[i], self.env_key[i], self.env_arg[i],
+                                    self.env_cost[i], self.env_refined[i], self.count[i],
+                                    self.d_sum[i], self.phi_max[i], self.phi_plus_min[i],
+                                    self.d_p[i], self.sigma_p[i], self.valid[i], self.relay[i],
+                                    beta, int(use_validity))
 
     # ------------------------------------------------------------------ downward (Eq. 7)
     @ti.kernel
