@@ -76,9 +76,10 @@ def _resolve_padding(slots, pairs):
     return ops, cur
 
 
-def _prune(ops, index):
-    """Keep only what position ``index`` depends on; ``("cmp", a, b, keep_min, keep_max)``."""
-    needed = {index}
+def _prune(ops, needed):
+    """Keep only what the positions ``needed`` depend on; ``("cmp", a, b, keep_min,
+    keep_max)``."""
+    needed = set(needed)
     kept = []
     for op, a, b in reversed(ops):
         if op == "swap":
@@ -95,35 +96,58 @@ def _prune(ops, index):
     return kept[::-1]
 
 
+def _merge_network(lengths, ranks):
+    """A pruned network that merges sorted runs of ``lengths`` far enough to place the given
+    ``ranks`` of their union (0-based, ascending order).
+
+    Each run is padded to ``block`` (the next power of two) slots, the runs to a power of
+    two, and the padding is split between -inf and +inf so that rank ``r`` ends at position
+    ``n_low + r``; the merge stages of Batcher's odd-even merge sort then run with every
+    comparator that touches padding resolved.  Returns ``(slots, ops, positions)``: the
+    initial content of each position (``"lo"``/``"hi"`` padding or ``(run, rank)``), the
+    ops (see :func:`median_network`) and where each of ``ranks`` ends."""
+    block = _next_pow2(max(lengths))
+    size = _next_pow2(len(lengths) * block)
+    n_low = (size - sum(lengths)) // 2
+    slots, lows = [], n_low
+    for run in range(size // block):
+        length = lengths[run] if run < len(lengths) else 0
+        n_lo = min(lows, block - length)
+        lows -= n_lo
+        slots += ["lo"] * n_lo + [(run, r) for r in range(length)] + \
+            ["hi"] * (block - length - n_lo)
+    positions = tuple(n_low + r for r in ranks)
+    ops, _ = _resolve_padding(slots, _batcher(size, block))
+    return tuple(slots), tuple(_prune(ops, positions)), positions
+
+
 def median_network(k):
-    """A selection network for the median of a ``k x k`` window (``k`` odd), in two stages.
+    """Selection networks for the medians of two horizontally adjacent ``k x k`` windows
+    (``k`` odd), in three stages that share work between windows (after Adams, "Fast median
+    filters using separable sorting networks", 2021).
 
     1. ``column_ops``: sort each window column of ``k`` values (Batcher over the next power
        of two, the padding +inf, pruned) -- shared by every window that contains the column.
-    2. ``ops``: merge the ``k`` sorted columns (each padded to ``block`` slots) with the
-       merge stages of Batcher's odd-even merge sort, pruned to what the middle rank needs.
+    2. ``shared``: merge the ``k - 1`` sorted columns that both windows contain, only as far
+       as ranks ``m - k .. m`` of their union (``m = (k*k - 1) // 2``): a value below rank
+       ``m - k`` stays below the median whatever the remaining ``k`` values are, one above
+       rank ``m`` stays above it.  ``shared = (slots, ops, survivors)``, ``slots`` holding
+       ``(column, rank)`` with ``column`` counted from the left of the shared columns.
+    3. ``final``: per window, merge the ``k + 1`` survivors (run 0) with its own sorted
+       column (run 1); the median of the window is rank ``k`` of these ``2k + 1`` values.
+       ``final = (slots, ops, index)``.
 
-    ``slots`` gives the initial content of each of the ``size`` positions of stage 2:
-    ``("lo")``/``("hi")`` padding or ``(column, rank)``; the median ends at ``index``.  Ops
-    are ``(op, a, b, keep_min, keep_max)`` with ``op`` ``"cmp"`` (position ``a`` gets the
-    minimum, ``b`` the maximum, each only if still needed) or ``"swap"`` (a comparator whose
-    outcome padding decides).  Returns ``(column_ops, slots, ops, index)``.
+    Ops are ``(op, a, b, keep_min, keep_max)`` with ``op`` ``"cmp"`` (position ``a`` gets
+    the minimum, ``b`` the maximum, each only if still needed) or ``"swap"`` (a comparator
+    whose outcome padding decides).  Returns ``(column_ops, shared, final)``.
     """
     block = _next_pow2(k)
     column_ops, _ = _resolve_padding(list(range(k)) + ["hi"] * (block - k), _batcher(block))
-    column_ops = [(op, a, b, True, True) for op, a, b in column_ops]
-    size = _next_pow2(k * block)
-    n_low = (size - k * k) // 2
-    slots, lows = [], n_low
-    for col in range(size // block):
-        pads = block - k if col < k else block
-        n_lo = min(lows, pads)
-        lows -= n_lo
-        values = [(col, r) for r in range(k)] if col < k else []
-        slots += ["lo"] * n_lo + values + ["hi"] * (pads - n_lo)
-    index = n_low + (k * k - 1) // 2
-    ops, _ = _resolve_padding(slots, _batcher(size, block))
-    return column_ops, slots, _prune(ops, index), index
+    column_ops = tuple((op, a, b, True, True) for op, a, b in column_ops)
+    m = (k * k - 1) // 2
+    shared = _merge_network([k] * (k - 1), range(m - k, m + 1))
+    slots, ops, (index,) = _merge_network([k + 1, k], [k])
+    return column_ops, shared, (slots, ops, index)
 
 
 @ti.data_oriented
@@ -152,8 +176,7 @@ class LevelSet:
         self.boundary_clip = float(params.boundary_clip)
         self.median_size = int(params.median_size)
         if self.median_size > 1:
-            column_ops, slots, ops, index = median_network(self.median_size)
-            self._network = (tuple(column_ops), tuple(slots), tuple(ops), index)
+            self._network = median_network(self.median_size)
             self._columns = pool.vector(self.median_size, ti.f32, (H, W))
         self.scale = float(params.phi_scale)
         self._sd = pool.field(ti.f32, (H, W, 1))
@@ -172,10 +195,16 @@ class LevelSet:
     @ti.func
     def _reflect(self, i, n):
         """Symmetric border: -1 -> 0, -2 -> 1, n -> n - 1 (MATLAB's 'symmetric', numpy's
-        ``pad(mode="symmetric")``), repeated for offsets wider than the image."""
-        j = i % (2 * n)
-        if j >= n:
-            j = 2 * n - 1 - j
+        ``pad(mode="symmetric")``), repeated for offsets wider than the image.  Indices
+        inside the image skip the (costly) integer modulo."""
+        j = i
+        if i < 0 or i >= n:
+            j = i % (2 * n)
+            if j < 0:
+                # Taichi's algebraic simplification can turn (2 p - 1) % 2 into C's -1
+                j += 2 * n
+            if j >= n:
+                j = 2 * n - 1 - j
         return j
 
     @ti.func
@@ -346,22 +375,41 @@ class LevelSet:
                 v[r] = src[self._reflect(y + r - k // 2, self.H), x]
             self._columns[y, x] = self._apply(v, column_ops)
 
+    @ti.func
+    def _load(self, slots: ti.template(), runs: ti.template()):
+        """The initial vector of a merge network: padding as -+1e30, ``(run, rank)`` from the
+        sorted ``runs``."""
+        v = ti.Vector.zero(ti.f32, ti.static(len(slots)))
+        for i in ti.static(range(len(slots))):
+            if ti.static(slots[i] == "lo"):
+                v[i] = -1e30
+            elif ti.static(slots[i] == "hi"):
+                v[i] = 1e30
+            else:
+                v[i] = runs[ti.static(slots[i][0])][ti.static(slots[i][1])]
+        return v
+
     @ti.kernel
-    def _median_of_columns(self, dst: ti.template(), k: ti.template(), slots: ti.template(),
-                           ops: ti.template(), index: ti.template()):
-        """Stage 2: merge the k sorted columns of each window up to the middle rank."""
-        for y, x in dst:
-            cols = [self._columns[y, self._reflect(x + c - k // 2, self.W)]
-                    for c in ti.static(range(k))]
-            v = ti.Vector.zero(ti.f32, ti.static(len(slots)))
-            for i in ti.static(range(len(slots))):
-                if ti.static(slots[i] == "lo"):
-                    v[i] = -1e30
-                elif ti.static(slots[i] == "hi"):
-                    v[i] = 1e30
-                else:
-                    v[i] = cols[ti.static(slots[i][0])][ti.static(slots[i][1])]
-            dst[y, x] = self._apply(v, ops)[index]
+    def _median_of_columns(self, dst: ti.template(), k: ti.template(), shared: ti.template(),
+                           final: ti.template()):
+        """Stages 2 and 3: the medians at (y, x) and (y, x + 1), x even, from the sorted
+        columns (the k - 1 columns both windows hold are merged once)."""
+        shared_slots, shared_ops, survivors = ti.static(shared)
+        final_slots, final_ops, index = ti.static(final)
+        for y, pair in ti.ndrange(self.H, (self.W + 1) // 2):
+            x = 2 * pair
+            columns = [self._columns[y, self._reflect(x + c - k // 2 + 1, self.W)]
+                       for c in ti.static(range(k - 1))]
+            v = self._apply(self._load(shared_slots, columns), shared_ops)
+            kept = ti.Vector([v[i] for i in ti.static(survivors)])
+            for side in ti.static(range(2)):
+                # the window's own column: x - k // 2 (left window), x + 1 + k // 2 (right)
+                own = self._columns[y, self._reflect(x + side * k - k // 2, self.W)]
+                median = self._apply(self._load(final_slots, [kept, own]), final_ops)[index]
+                if ti.static(side == 0):
+                    dst[y, x] = median
+                elif x + 1 < self.W:
+                    dst[y, x + 1] = median
 
     @ti.kernel
     def _copy(self, src: ti.template(), dst: ti.template()):
@@ -399,9 +447,9 @@ class LevelSet:
         if k == 1:
             self._copy(src, dst)
             return
-        column_ops, slots, ops, index = self._network
+        column_ops, shared, final = self._network
         self._sort_columns(src, k, column_ops)
-        self._median_of_columns(dst, k, slots, ops, index)
+        self._median_of_columns(dst, k, shared, final)
 
     @ti.kernel
     def _count_flips(self, before: ti.template()):

@@ -311,24 +311,46 @@ def _run_ops(v, ops):
 
 
 @pytest.mark.parametrize("k", [3, 5, 7])
-def test_median_network_sorts_columns_then_selects_the_median(k):
-    from lss_kernels.levelset import _batcher, median_network
-    column_ops, slots, ops, index = median_network(k)
-    n_full = len(_batcher(len(slots)))
-    assert len(ops) + len(column_ops) < n_full / 2   # far fewer than sorting k*k values
+def test_median_network_selects_the_medians_of_two_adjacent_windows(k):
+    from lss_kernels.levelset import _merge_network, median_network
+    column_ops, (s_slots, s_ops, survivors), (f_slots, f_ops, index) = median_network(k)
+    # per output pixel: half the shared merge, one final merge, the column sort -- against
+    # merging all k sorted columns of one window to its median
+    per_pixel = len(s_ops) / 2 + len(f_ops) + len(column_ops)
+    _, one_window, _ = _merge_network([k] * k, [(k * k - 1) // 2])
+    assert per_pixel < 0.62 * (len(one_window) + len(column_ops))
+    assert len(survivors) == k + 1
+    load = lambda slots, runs: [-np.inf if s == "lo" else np.inf if s == "hi"
+                                else runs[s[0]][s[1]] for s in slots]
     rng = np.random.default_rng(10)
     for trial in range(200):
-        window = rng.standard_normal((k, k))
+        block = rng.standard_normal((k, k + 1))          # two windows: columns 0..k-1, 1..k
         if trial % 4 == 0:
-            window = np.round(window)                   # many ties
+            block = np.round(block)                      # many ties
         columns = []
-        for c in range(k):
-            col = _run_ops(list(window[:, c]), column_ops)
-            assert col[:k] == sorted(window[:, c])
+        for c in range(k + 1):
+            col = _run_ops(list(block[:, c]), column_ops)
+            assert col[:k] == sorted(block[:, c])
             columns.append(col)
-        v = [-np.inf if s == "lo" else np.inf if s == "hi" else columns[s[0]][s[1]]
-             for s in slots]
-        assert _run_ops(v, ops)[index] == np.median(window)
+        merged = _run_ops(load(s_slots, columns[1:k]), s_ops)
+        kept = [merged[i] for i in survivors]
+        for side, own in ((0, columns[0]), (1, columns[k])):
+            window = block[:, side:side + k]
+            assert _run_ops(load(f_slots, [kept, own]), f_ops)[index] == np.median(window)
+
+
+@pytest.mark.parametrize("k, width", [(3, 9), (5, 12), (7, 1), (7, 2), (7, 13)])
+def test_median_filter_matches_numpy_for_odd_and_tiny_widths(ti_arch, k, width):
+    from lss_kernels.levelset import LevelSet
+    pool = FieldPool()
+    ls = LevelSet(pool, 5, width, Params(median_size=k))
+    pool.finalize()
+    rng = np.random.default_rng(k * 100 + width)
+    a = np.round(rng.standard_normal((5, width)) * 2).astype(np.float32)
+    ls.phi_next.from_numpy(a)
+    ls.median(ls.phi_next, ls.phi)
+    np.testing.assert_array_equal(ls.phi.to_numpy(), ref.median_filter(a, k))
+    pool.destroy()
 
 
 def test_median_filter_matches_numpy_with_ties_and_borders(levelset):
