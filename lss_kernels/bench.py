@@ -5,8 +5,9 @@ textured two-plane pairs, across image size, disparity range and CPU thread coun
 set-up (cost volumes, B_occ, edge maps) and Taichi's compile time (the extra time of a warm-up
 iteration); fits the scaling exponent of every stage against pixels x disparities; compares
 with the numpy specification of one iteration (:mod:`lss_kernels.numpy_iteration`) at
-400x300 with 64 disparities; and measures the machine's memory bandwidth to say how close an
-iteration comes to streaming its patch-cost volumes once.
+400x300 with 64 disparities; and measures the memory bandwidth (a numpy copy on the CPU, a
+Taichi copy kernel in device memory on a GPU) to say how close an iteration comes to streaming
+its patch-cost volumes once.
 
 Outputs (``--out``): ``scaling.csv`` (one row per configuration and stage), ``speedup.csv``,
 ``scaling.png`` (log-log seconds vs pixels x disparities with the fitted exponents),
@@ -110,6 +111,37 @@ def bandwidth(nbytes=256 << 20, repeats=5):
     return 2.0 * src.nbytes / best / 1e9
 
 
+def device_bandwidth(nbytes=256 << 20, repeats=5):
+    """Bandwidth in GB/s of a Taichi copy kernel between two fields on the arch Taichi runs
+    on (read + write counted): on a GPU, the memory the kernels stream from."""
+    import taichi as ti
+
+    n = max(1, nbytes // 8)
+    src, dst = ti.field(ti.f32), ti.field(ti.f32)
+    builder = ti.FieldsBuilder()
+    builder.dense(ti.i, n).place(src)
+    builder.dense(ti.i, n).place(dst)
+    tree = builder.finalize()
+
+    @ti.kernel
+    def copy():
+        for i in dst:
+            dst[i] = src[i]
+
+    try:
+        copy()
+        ti.sync()
+        best = float("inf")
+        for _ in range(repeats):
+            t = time.perf_counter()
+            copy()
+            ti.sync()
+            best = min(best, time.perf_counter() - t)
+    finally:
+        tree.destroy()
+    return 2.0 * 4 * n / best / 1e9
+
+
 def fit_exponent(work, seconds):
     """Least-squares slope of log(seconds) against log(work) (``nan`` if fewer than 2
     distinct usable points)."""
@@ -193,6 +225,9 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
         out["numpy"] = {k: v / m for k, v in tot.items()}
         out["numpy_iterations"] = m
     out["maxrss_bytes"] = _maxrss_bytes()
+    from . import backend
+    if backend.current_arch() not in (None, "cpu"):
+        out["bandwidth_gbs"] = device_bandwidth()   # after the RSS reading: it allocates
     return out
 
 
@@ -275,6 +310,7 @@ def run_benchmark(quick=False, arch="cpu", threads=(None,), out=None, log=print,
     t_start = time.perf_counter()
     configs = plan(quick, threads, overrides)
     bw = bandwidth(64 << 20 if quick else 256 << 20)
+    source = "numpy copy"
     log(f"memory bandwidth (numpy copy): {bw:.1f} GB/s; {len(configs)} configurations")
     rows, compare = [], None
     for c in configs:
@@ -283,6 +319,10 @@ def run_benchmark(quick=False, arch="cpu", threads=(None,), out=None, log=print,
         else:
             r = measure(c["width"], c["height"], c["d_max"], c["iterations"],
                         c["numpy_iterations"])
+        if "bandwidth_gbs" in r and source == "numpy copy":
+            # a GPU: the volumes live in device memory; use its bandwidth from here on
+            bw, source = r["bandwidth_gbs"], f"Taichi copy kernel on {arch}"
+            log(f"device memory bandwidth ({source}): {bw:.1f} GB/s")
         row = _row(c, r, bw)
         rows.append(row)
         log(f"[{c['sweep']}] {c['width']}x{c['height']} d={c['d_max']} threads="
@@ -296,7 +336,8 @@ def run_benchmark(quick=False, arch="cpu", threads=(None,), out=None, log=print,
                 f"{1e3 * compare['numpy_iteration']:.1f} ms, Taichi "
                 f"{1e3 * compare['taichi_iteration']:.2f} ms: {compare['speedup_iteration']:.1f}x")
     result = dict(arch=arch, quick=bool(quick), cpu_count=os.cpu_count(), bandwidth_gbs=bw,
-                  isolated=bool(isolate), offline_cache=not cold, rows=rows)
+                  bandwidth_source=source, isolated=bool(isolate), offline_cache=not cold,
+                  rows=rows)
     first, sized = _size_series(rows)
     expo, expo_px = {}, {}
     for k in STAGES + ("iteration",):
@@ -424,8 +465,8 @@ def report(result):
     lines = ["# lss bench results", ""]
     lines.append(f"arch: {result['arch']}, cpu_count: {result['cpu_count']}, quick: "
                  f"{result['quick']}, one process per configuration: {result['isolated']}, "
-                 f"offline cache: {result['offline_cache']}; memory bandwidth (numpy copy, "
-                 f"read + write): {result['bandwidth_gbs']:.1f} GB/s; peak RSS "
+                 f"offline cache: {result['offline_cache']}; memory bandwidth "
+                 f"({result.get('bandwidth_source', 'numpy copy')}, read + write): {result['bandwidth_gbs']:.1f} GB/s; peak RSS "
                  f"{result['maxrss_bytes'] / 2 ** 20:.0f} MiB; run time "
                  f"{result.get('seconds', float('nan')):.0f} s.")
     lines += ["", "## Per configuration (ms per iteration; setup and compile in s)", "",

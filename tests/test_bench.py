@@ -25,6 +25,10 @@ def test_tiny_run_returns_the_expected_keys(ti_arch, tmp_path):
     assert s["taichi_iteration"] > 0 and s["numpy_iteration"] > 0
     assert s["speedup_iteration"] == pytest.approx(s["numpy_iteration"] / s["taichi_iteration"])
     assert s["bandwidth_gbs"] > 0 and s["maxrss_bytes"] > 0
+    # the volumes' memory: the host's on the CPU, the device's on a GPU
+    on_gpu = ti_arch != "cpu"
+    assert result["bandwidth_source"] == ("Taichi copy kernel on " + ti_arch if on_gpu
+                                          else "numpy copy")
     row = result["rows"][0]
     assert row["c_max"] == 8 and row["work"] == 56 * 40 * 8
     assert row["memory_bytes"] >= row["level_bytes"] > 0
@@ -32,6 +36,11 @@ def test_tiny_run_returns_the_expected_keys(ti_arch, tmp_path):
     for name in ("scaling.csv", "speedup.csv", "results.json", "results.md"):
         assert (tmp_path / name).stat().st_size > 0
     assert "Taichi vs numpy" in (tmp_path / "results.md").read_text()
+
+
+def test_device_bandwidth_copies_through_a_kernel(ti_arch):
+    gbs = bench.device_bandwidth(nbytes=8 << 20, repeats=2)
+    assert math.isfinite(gbs) and gbs > 0.1
 
 
 def test_plan_merges_repeated_configurations():
