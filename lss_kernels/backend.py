@@ -4,8 +4,6 @@ The library never calls ``ti.init`` on import: entry points (the CLI, demos, ben
 pytest fixture) call :func:`init` once.  Kernels compiled by the solver are cached on disk by
 Taichi's offline cache so that a second run of the CLI skips most of the compile time.
 """
-from __future__ import annotations
-
 import os
 
 import taichi as ti
@@ -87,6 +85,16 @@ def _bytes(dtype) -> int:
     return 4
 
 
+@ti.kernel
+def _zero_all(fields: ti.template()):
+    for f in ti.static(fields):
+        for I in ti.grouped(f):
+            if ti.static(isinstance(f, ti.MatrixField)):
+                f[I] = ti.Vector.zero(f.dtype, f.n)
+            else:
+                f[I] = ti.cast(0, f.dtype)
+
+
 class FieldPool:
     """Allocates fields in one SNode tree that can be freed as a whole.
 
@@ -100,6 +108,7 @@ class FieldPool:
         self._builder = ti.FieldsBuilder()
         self._tree = None
         self.nbytes = 0
+        self.fields = []
 
     def _place(self, f, shape, offset, nbytes):
         shape = tuple(int(s) for s in shape)
@@ -112,6 +121,7 @@ class FieldPool:
         for s in shape:
             n *= s
         self.nbytes += n * nbytes
+        self.fields.append(f)
         return f
 
     def field(self, dtype, shape, offset=None):
@@ -123,6 +133,11 @@ class FieldPool:
     def finalize(self):
         self._tree = self._builder.finalize()
         return self
+
+    def zero(self):
+        """Set every field to 0, the state of a freshly finalised pool (one kernel for all
+        of them: ``fill`` would compile one per field)."""
+        _zero_all(tuple(self.fields))
 
     def destroy(self):
         if self._tree is not None:

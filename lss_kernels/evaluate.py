@@ -28,6 +28,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 
 from . import io, metrics
@@ -55,16 +56,52 @@ def _init_worker(arch: str, threads: int, methods) -> None:
         require_opencv().setNumThreads(threads)
 
 
+#: This process's last solver, reused (``Solver.reset``) for the next scene of the same size
+#: and search range: a new Solver compiles its kernels again, which takes longer than many
+#: scenes' iterations.
+_SOLVER = {}
+
+
+def _solve(scene: io.Scene, params):
+    from .solver import Solver, _c_max
+    if scene.init_ellipse_cyclopean is not None:
+        init, frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
+    else:
+        init, frame = tuple(scene.init_ellipse), "left"
+    key = (scene.left.shape[:2], _c_max(scene.d_max), params)
+    solver = _SOLVER.get(key)
+    if solver is None:
+        _release_solver()
+        solver = Solver(scene.left, scene.right, scene.d_max, init, params=params,
+                        init_frame=frame)
+        _SOLVER[key] = solver
+    else:
+        solver.reset(scene.left, scene.right, scene.d_max, init, init_frame=frame)
+    return solver.run()
+
+
+def _release_solver() -> None:
+    for solver in _SOLVER.values():
+        solver.close()
+    _SOLVER.clear()
+
+
+def _solver_key(task):
+    """Sort key that puts the runs one solver can share next to each other: the scene's
+    image size (from the PNG header) and search range."""
+    scene_dir = Path(task[0])
+    try:
+        meta = json.loads((scene_dir / "meta.json").read_text())
+        shape = iio.improps(scene_dir / "left.png").shape[:2]
+        return (0, tuple(shape), int(np.ceil(float(meta["d_max"]) / 2)), str(scene_dir))
+    except Exception:           # unreadable scenes fail later, with load_scene's message
+        return (1, (), 0.0, str(scene_dir))
+
+
 def _run_method(method: str, scene: io.Scene, params):
     """Disparity and occlusion (left view) of one method on one scene, and extra facts."""
     if method == "lss":
-        from .solver import solve
-        if scene.init_ellipse_cyclopean is not None:
-            init, frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
-        else:
-            init, frame = tuple(scene.init_ellipse), "left"
-        result = solve(scene.left, scene.right, scene.d_max, init, params=params,
-                       init_frame=frame)
+        result = _solve(scene, params)
         extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason)}
         return result.disparity, result.occlusion, extra
     disparity, occlusion = BASELINES[method](scene.left, scene.right, scene.d_max)
@@ -207,14 +244,17 @@ def _execute(todo, methods, jobs: int, arch: str):
             from . import backend
             if backend.current_arch() != arch:
                 backend.init(arch=arch)
-        for task in todo:
-            yield _run_one(*task)
+        try:
+            for task in sorted(todo, key=_solver_key):
+                yield _run_one(*task)
+        finally:
+            _release_solver()
         return
     threads = max(1, (os.cpu_count() or 1) // jobs)
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn"),
                                initializer=_init_worker, initargs=(arch, threads, methods))
     try:
-        futures = [pool.submit(_run_one, *task) for task in todo]
+        futures = [pool.submit(_run_one, *task) for task in sorted(todo, key=_solver_key)]
         for future in as_completed(futures):
             yield future.result()
     finally:

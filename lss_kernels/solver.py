@@ -110,10 +110,8 @@ class Solver:
             raise TypeError(f"params: expected lss_kernels.Params, got {type(params).__name__}")
         left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
                                                 self.params)
-        self.left_image = left
         self.H, self.W = left.shape[:2]
-        self.d_max = float(d_max)
-        self.c_max = max(1, int(np.ceil(self.d_max / 2.0)))
+        self.c_max = _c_max(d_max)
         self.profile = profile
         H, W, C = self.H, self.W, self.c_max
 
@@ -132,6 +130,33 @@ class Solver:
         self.weight_bg = pool.field(ti.f32, (H, W))
         pool.finalize()
         self.levelset.setup()
+        self._load(left, right, d_max, init, init_frame, t_start)
+
+    def reset(self, left, right, d_max, init, init_frame="left"):
+        """Start over on another pair of the same size and the same ``c_max``, in this
+        solver's fields and with its compiled kernels (a new :class:`Solver` compiles its
+        kernels again, which takes seconds; use this to solve a sequence of pairs).
+
+        Arguments as for :class:`Solver`; the state is exactly that of a new solver.
+        """
+        from .validate import check_inputs
+        t_start = time.perf_counter()
+        if self.pool is None:
+            raise RuntimeError("reset: the solver is closed; build a new Solver")
+        left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
+                                                self.params)
+        if left.shape[:2] != (self.H, self.W) or _c_max(d_max) != self.c_max:
+            raise ValueError(f"reset: expected a {self.W}x{self.H} pair with ceil(d_max / 2) "
+                             f"= {self.c_max} (this solver's fields), got "
+                             f"{left.shape[1]}x{left.shape[0]} with d_max {d_max}; build a "
+                             f"new Solver for it")
+        self.pool.zero()
+        self._load(left, right, d_max, init, init_frame, t_start)
+
+    def _load(self, left, right, d_max, init, init_frame, t_start):
+        """Set-up of a solve in zeroed fields: images, cost volumes, the initial phi."""
+        self.left_image = left
+        self.d_max = float(d_max)
         self.left.from_numpy(left)
         self.right.from_numpy(right)
 
@@ -363,13 +388,20 @@ class Solver:
 
     def close(self):
         """Free the solver's device memory (the object cannot be used afterwards)."""
-        self.levelset.destroy()
-        self.pool.destroy()
+        if self.pool is not None:
+            self.levelset.destroy()
+            self.pool.destroy()
+            self.pool = None
 
     @property
     def memory_bytes(self):
         """Bytes held by the solver's fields."""
-        return self.pool.nbytes
+        return self.pool.nbytes if self.pool is not None else 0
+
+
+def _c_max(d_max):
+    """The cyclopean search range: ``ceil(d_max / 2)`` candidates, at least 1."""
+    return max(1, int(np.ceil(float(d_max) / 2.0)))
 
 
 def _shift_columns(mask, shift):

@@ -134,6 +134,35 @@ def test_process_pool_matches_in_process(dataset, tmp_path, capsys):
     assert len(progress) == 4 and progress[-1].startswith("[4/4] ")
 
 
+def test_lss_scenes_of_one_size_share_a_solver_and_match_a_fresh_solve(dataset, tmp_path,
+                                                                       monkeypatch):
+    from lss_kernels import solver as solver_module
+    from lss_kernels.io import load_scene
+    from lss_kernels.metrics import score
+    built, resets = [], []
+
+    class Counting(solver_module.Solver):
+        def __init__(self, *args, **kwargs):
+            built.append(1)
+            super().__init__(*args, **kwargs)
+
+        def reset(self, *args, **kwargs):
+            resets.append(1)
+            return super().reset(*args, **kwargs)
+
+    monkeypatch.setattr(solver_module, "Solver", Counting)
+    rows = run_eval(dataset, methods=("lss",), out=tmp_path, params=FAST, progress=False)
+    assert (len(built), len(resets)) == (1, len(SCENES) - 1)
+    row = rows[-1]                      # a reset solver scores as a new one
+    scene = load_scene(dataset / row["scene"])
+    init, frame = ((scene.init_ellipse_cyclopean, "cyclopean")
+                   if scene.init_ellipse_cyclopean is not None else (scene.init_ellipse, "left"))
+    result = solver_module.solve(scene.left, scene.right, scene.d_max, tuple(init),
+                                 params=FAST, init_frame=frame)
+    s = score(result.disparity, result.occlusion, scene)
+    assert (row["occ_f1"], row["bad4"]) == (s["occ_f1"], s["bad4"])
+
+
 def test_unknown_method(dataset, tmp_path):
     with pytest.raises(ValueError, match=r"unknown method\(s\) 'kz'; valid: lss, sgm, bm-lr"):
         run_eval(dataset, methods=("sgm", "kz"), out=tmp_path)

@@ -277,6 +277,21 @@ def test_distance_transform_is_exact(ti_arch, shape):
     pool.destroy()
 
 
+def test_field_pool_zero_restores_fresh_fields(ti_arch):
+    pool = FieldPool()
+    a = pool.field(ti.f32, (3, 4))
+    b = pool.vector(2, ti.i32, (5,))
+    c = pool.field(ti.i8, (2, 2, 2), offset=(-1, 0, 0))
+    pool.finalize()
+    a.fill(1.5)
+    b.fill(7)
+    c.fill(-3)
+    pool.zero()
+    assert not a.to_numpy().any() and not b.to_numpy().any() and not c.to_numpy().any()
+    assert pool.fields == [a, b, c]
+    pool.destroy()
+
+
 @pytest.fixture(scope="module")
 def levelset(ti_arch):
     from lss_kernels.levelset import LevelSet

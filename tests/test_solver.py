@@ -53,6 +53,29 @@ def test_stepping_gives_the_same_result_as_solve(easy):
     np.testing.assert_array_equal(stepped.phi, result.phi)
 
 
+def test_reset_solves_another_pair_exactly_like_a_new_solver(ti_arch):
+    a, b = make_scene("tiny", seed=0), make_scene("tiny", seed=1)
+    params = Params(max_iterations=25)
+    fresh = {"a": solve(a.left, a.right, a.d_max, a.init_ellipse, params=params)}
+    solver = Solver(b.left, b.right, b.d_max, b.init_ellipse, params=params)
+    fresh["b"] = solver.run()
+    for name, scene in (("a", a), ("b", b)):
+        solver.reset(scene.left, scene.right, scene.d_max, scene.init_ellipse)
+        assert solver.iteration == 0 and not solver.done and solver.history == []
+        again = solver.run()
+        assert again.iterations == fresh[name].iterations
+        for key in ("phi", "disparity", "occlusion", "consensus_mean", "theta_fg"):
+            np.testing.assert_array_equal(getattr(again, key), getattr(fresh[name], key))
+    with pytest.raises(ValueError, match=r"reset: expected a 64x48 pair with ceil\(d_max / 2\) "
+                       r"= \d+ .* got 64x47"):
+        solver.reset(a.left[:47], a.right[:47], a.d_max, a.init_ellipse)
+    with pytest.raises(ValueError, match=r"ceil\(d_max / 2\)"):
+        solver.reset(a.left, a.right, 4 * a.d_max, a.init_ellipse)
+    solver.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        solver.reset(a.left, a.right, a.d_max, a.init_ellipse)
+
+
 @pytest.mark.slow
 def test_recovers_a_slanted_curved_scene(ti_arch):
     scene = make_scene("slanted")
