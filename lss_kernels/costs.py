@@ -38,38 +38,69 @@ def gaussian_taps(sigma, half_width=None):
     return g, g1, g2
 
 
+#: B_occ is filtered this many disparity planes at a time (its scratch).
+CHUNK = 8
+
+
 @ti.data_oriented
 class BoundaryCosts:
     """Owns B_occ (a volume) and the two monocular edge maps; evaluates B at any (x, y, c)."""
 
     def __init__(self, pool, height, width, c_max):
         self.H, self.W, self.C = int(height), int(width), int(c_max)
-        self.b_occ = pool.field(ti.f32, (self.H, self.W, self.C))
-        self.edge_left = pool.field(ti.f32, (self.H, self.W))
-        self.edge_right = pool.field(ti.f32, (self.H, self.W))
+        H, W, C = self.H, self.W, self.C
+        self.b_occ = pool.field(ti.f32, (H, W, C))
+        self.edge_left = pool.field(ti.f32, (H, W))
+        self.edge_right = pool.field(ti.f32, (H, W))
         self._max = pool.field(ti.f32, ())
         self.alpha = pool.vector(3, ti.f32, ())
+        # scratch, kept for the solver's life: destroying an SNode tree makes Taichi drop
+        # every compiled kernel, which a reset solver would then compile again
+        self._chunk = pool.field(ti.f32, (H, W, min(C, CHUNK)))   # B_occ, CHUNK planes at a time
+        self._dist2 = pool.field(ti.f32, (H, W, 1))
+        self._edt3 = self._edt2 = None
+
+    def setup(self):
+        """Allocate the distance-transform scratch; call once the pool is finalised."""
+        budget = 4 * self.H * self.W              # elements: a few planes
+        self._edt3 = DistanceTransform((self.H, self.W, self.C), max_scratch=budget)
+        self._edt2 = DistanceTransform((self.H, self.W, 1), max_scratch=budget)
+
+    def destroy(self):
+        for edt in (self._edt3, self._edt2):
+            if edt is not None:
+                edt.destroy()
+        self._edt3 = self._edt2 = None
+
+    @property
+    def scratch_bytes(self):
+        return sum(e.nbytes for e in (self._edt3, self._edt2) if e is not None)
 
     # -------------------------------------------------------------------- B_occ
     @ti.kernel
-    def _smooth_y(self, src: ti.template(), dst: ti.template(), taps: ti.types.ndarray()):
+    def _smooth_y(self, src: ti.template(), taps: ti.types.ndarray(), k0: ti.i32):
+        """Planes k0 .. k0 + CHUNK - 1 of src, smoothed along y, into the chunk."""
         half = (taps.shape[0] - 1) // 2
-        for y, x, k in dst:
-            s = 0.0
-            for i in range(-half, half + 1):
-                yy = ti.min(ti.max(y + i, 0), self.H - 1)
-                s += taps[i + half] * src[yy, x, k]
-            dst[y, x, k] = s
+        for y, x, j in self._chunk:
+            k = k0 + j
+            if k < self.C:
+                s = 0.0
+                for i in range(-half, half + 1):
+                    yy = ti.min(ti.max(y + i, 0), self.H - 1)
+                    s += taps[i + half] * src[yy, x, k]
+                self._chunk[y, x, j] = s
 
     @ti.kernel
-    def _occ_features(self, src: ti.template(), taps: ti.types.ndarray(), threshold: ti.f32):
+    def _occ_features(self, taps: ti.types.ndarray(), threshold: ti.f32, k0: ti.i32):
         half = (taps.shape[0] - 1) // 2
-        for y, x, k in self.b_occ:
-            s = 0.0
-            for i in range(-half, half + 1):
-                xx = ti.min(ti.max(x + i, 0), self.W - 1)
-                s += taps[i + half] * src[y, xx, k]
-            self.b_occ[y, x, k] = 0.0 if ti.abs(s) > threshold else INF
+        for y, x, j in self._chunk:
+            k = k0 + j
+            if k < self.C:
+                s = 0.0
+                for i in range(-half, half + 1):
+                    xx = ti.min(ti.max(x + i, 0), self.W - 1)
+                    s += taps[i + half] * self._chunk[y, xx, j]
+                self.b_occ[y, x, k] = 0.0 if ti.abs(s) > threshold else INF
 
     @ti.kernel
     def _sqrt_normalise(self, vol: ti.template()):
@@ -90,17 +121,13 @@ class BoundaryCosts:
         # gradient of the smoothing kernel gives)
         dg = np.zeros_like(g)
         dg[1:-1] = (g[2:] - g[:-2]) / 2.0
-        tmp = ti.field(ti.f32)
-        builder = ti.FieldsBuilder()
-        builder.dense(ti.ijk, (self.H, self.W, self.C)).place(tmp)
-        tree = builder.finalize()
-        self._smooth_y(cost_level1, tmp, g.astype(np.float32))
+        g = g.astype(np.float32)
         # correlation with dg[::-1] is convolution with dg
-        self._occ_features(tmp, dg[::-1].astype(np.float32).copy(), float(threshold))
-        tree.destroy()
-        edt = DistanceTransform((self.H, self.W, self.C))
-        edt.run(self.b_occ)
-        edt.destroy()
+        dg = dg[::-1].astype(np.float32).copy()
+        for k0 in range(0, self.C, self._chunk.shape[2]):
+            self._smooth_y(cost_level1, g, k0)
+            self._occ_features(dg, float(threshold), k0)
+        self._edt3.run(self.b_occ)
         self._sqrt_normalise(self.b_occ)
 
     # -------------------------------------------------------------------- B_mono
@@ -137,18 +164,11 @@ class BoundaryCosts:
 
     def build_mono(self, left, right, threshold):
         """Edge scores e_L, e_R of the two images (``(H, W)`` vector fields in [0, 1])."""
-        dist2 = ti.field(ti.f32)
-        builder = ti.FieldsBuilder()
-        builder.dense(ti.ijk, (self.H, self.W, 1)).place(dist2)
-        tree = builder.finalize()
-        edt = DistanceTransform((self.H, self.W, 1))
         for img, out in ((left, self.edge_left), (right, self.edge_right)):
             self._sobel_edges(img, out, float(threshold))
-            self._copy_to_3d(out, dist2)
-            edt.run(dist2)
-            self._edge_score(dist2, out)
-        edt.destroy()
-        tree.destroy()
+            self._copy_to_3d(out, self._dist2)
+            self._edt2.run(self._dist2)
+            self._edge_score(self._dist2, out)
 
     @ti.kernel
     def _copy_to_3d(self, src: ti.template(), dst: ti.template()):

@@ -25,7 +25,9 @@ class DistanceTransform:
     def __init__(self, shape, max_scratch: int = 1 << 22):
         self.shape = tuple(int(s) for s in shape)
         longest = max(self.shape)
-        lines = max(self.shape[0] * self.shape[1] * self.shape[2] // n for n in self.shape)
+        total = self.shape[0] * self.shape[1] * self.shape[2]
+        # the most lines of any processed axis (an axis of length 1 is skipped)
+        lines = max([total // n for n in self.shape if n > 1] or [1])
         self.batch = max(1, min(lines, max_scratch // longest))
         self.v = ti.field(ti.i32)
         self.z = ti.field(ti.f32)
@@ -34,6 +36,7 @@ class DistanceTransform:
         builder.dense(ti.ij, (self.batch, longest)).place(self.v, self.g)
         builder.dense(ti.ij, (self.batch, longest + 1)).place(self.z)
         self._tree = builder.finalize()
+        self.nbytes = 4 * self.batch * (2 * longest + longest + 1)
 
     def destroy(self) -> None:
         """Free the scratch memory (the object cannot be used afterwards)."""

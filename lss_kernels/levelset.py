@@ -186,6 +186,10 @@ class LevelSet:
         """Allocate the re-initialisation scratch; call once the pool is finalised."""
         self._edt = DistanceTransform((self.H, self.W, 1))
 
+    @property
+    def scratch_bytes(self):
+        return self._edt.nbytes if self._edt is not None else 0
+
     def destroy(self):
         if self._edt is not None:
             self._edt.destroy()

@@ -130,6 +130,7 @@ class Solver:
         self.weight_bg = pool.field(ti.f32, (H, W))
         pool.finalize()
         self.levelset.setup()
+        self.costs.setup()
         self._load(left, right, d_max, init, init_frame, t_start)
 
     def reset(self, left, right, d_max, init, init_frame="left"):
@@ -390,13 +391,16 @@ class Solver:
         """Free the solver's device memory (the object cannot be used afterwards)."""
         if self.pool is not None:
             self.levelset.destroy()
+            self.costs.destroy()
             self.pool.destroy()
             self.pool = None
 
     @property
     def memory_bytes(self):
-        """Bytes held by the solver's fields."""
-        return self.pool.nbytes if self.pool is not None else 0
+        """Bytes held by the solver's fields, distance-transform scratch included."""
+        if self.pool is None:
+            return 0
+        return self.pool.nbytes + self.levelset.scratch_bytes + self.costs.scratch_bytes
 
 
 def _c_max(d_max):
