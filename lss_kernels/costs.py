@@ -77,30 +77,33 @@ class BoundaryCosts:
         return sum(e.nbytes for e in (self._edt3, self._edt2) if e is not None)
 
     # -------------------------------------------------------------------- B_occ
+    @ti.func
+    def _correlate(self, src: ti.template(), taps: ti.template(), y, x, k,
+                   axis: ti.template()):
+        """sum_i taps[half + i] src at (y, x, k) + i along ``axis`` (0: y, 1: x), clamped."""
+        half = (taps.shape[0] - 1) // 2
+        s = 0.0
+        for i in range(-half, half + 1):
+            if ti.static(axis == 0):
+                s += taps[i + half] * src[ti.min(ti.max(y + i, 0), self.H - 1), x, k]
+            else:
+                s += taps[i + half] * src[y, ti.min(ti.max(x + i, 0), self.W - 1), k]
+        return s
+
     @ti.kernel
     def _smooth_y(self, src: ti.template(), taps: ti.types.ndarray(), k0: ti.i32):
         """Planes k0 .. k0 + CHUNK - 1 of src, smoothed along y, into the chunk."""
-        half = (taps.shape[0] - 1) // 2
         for y, x, j in self._chunk:
-            k = k0 + j
-            if k < self.C:
-                s = 0.0
-                for i in range(-half, half + 1):
-                    yy = ti.min(ti.max(y + i, 0), self.H - 1)
-                    s += taps[i + half] * src[yy, x, k]
-                self._chunk[y, x, j] = s
+            if k0 + j < self.C:
+                self._chunk[y, x, j] = self._correlate(src, taps, y, x, k0 + j, 0)
 
     @ti.kernel
     def _occ_features(self, taps: ti.types.ndarray(), threshold: ti.f32, k0: ti.i32):
-        half = (taps.shape[0] - 1) // 2
+        """B_occ's features of those planes: |d/dx of the chunk| above ``threshold``."""
         for y, x, j in self._chunk:
-            k = k0 + j
-            if k < self.C:
-                s = 0.0
-                for i in range(-half, half + 1):
-                    xx = ti.min(ti.max(x + i, 0), self.W - 1)
-                    s += taps[i + half] * self._chunk[y, xx, j]
-                self.b_occ[y, x, k] = 0.0 if ti.abs(s) > threshold else INF
+            if k0 + j < self.C:
+                s = self._correlate(self._chunk, taps, y, x, j, 1)
+                self.b_occ[y, x, k0 + j] = 0.0 if ti.abs(s) > threshold else INF
 
     @ti.kernel
     def _sqrt_normalise(self, vol: ti.template()):

@@ -162,3 +162,51 @@ def test_stopping_rule_waits_for_patience_quiet_windows(ti_arch, patience):
     assert result.iterations == 5 * patience
     assert result.stop_reason.startswith(f"converged at iteration {5 * patience}")
     assert f"{patience} windows in a row" in result.stop_reason
+
+
+def _correlate(a, taps, axis):
+    """sum_i taps[h + i] a[.. + i ..] along ``axis``, edges repeated (the kernels' clamping)."""
+    h = len(taps) // 2
+    pad = [(0, 0)] * a.ndim
+    pad[axis] = (h, h)
+    p = np.pad(a, pad, mode="edge")
+    n = a.shape[axis]
+    return sum(t * np.take(p, range(i, i + n), axis=axis) for i, t in enumerate(taps))
+
+
+def test_boundary_costs_match_a_numpy_reference(ti_arch):
+    """B_occ (Eq. 1): distance to the voxels where the epipolar derivative of the y-smoothed
+    size-3 cost exceeds the threshold, normalised; B_mono's edge scores: distance to Sobel
+    edges.  Both against numpy + scipy's exact EDT."""
+    import math
+    from scipy import ndimage
+    from lss_kernels.costs import gaussian_taps
+    scene = make_scene("tiny", seed=2)
+    params = Params(max_iterations=1)
+    solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=params)
+    H, W = solver.H, solver.W
+    m = solver.hierarchy.levels[0].margin
+    cost = solver.hierarchy.cost[0].to_numpy()[m:m + H, m:m + W].astype(np.float64)
+
+    g, _, _ = gaussian_taps(params.occ_sigma, int(math.ceil(4 * params.occ_sigma)))
+    dg = np.zeros_like(g)
+    dg[1:-1] = (g[2:] - g[:-2]) / 2.0
+    slope = _correlate(_correlate(cost, g, 0), dg[::-1], 1)
+    features = np.abs(slope) > params.occ_threshold
+    assert 0 < features.sum() < features.size
+    dist = ndimage.distance_transform_edt(~features)
+    np.testing.assert_allclose(solver.costs.b_occ.to_numpy(), np.minimum(dist / dist.max(), 1),
+                               atol=1e-5)
+
+    for image, edge in ((solver.left, solver.costs.edge_left),
+                        (solver.right, solver.costs.edge_right)):
+        rgb = image.to_numpy().astype(np.float64)
+        grey = np.pad(rgb @ [0.299, 0.587, 0.114], 1, mode="edge")
+        win = lambda dy, dx: grey[1 + dy:1 + dy + H, 1 + dx:1 + dx + W]
+        gx = sum(dx * (2 - abs(dy)) * win(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+        gy = sum(dy * (2 - abs(dx)) * win(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+        edges = np.hypot(gx, gy) / 8.0 > params.mono_threshold
+        assert edges.any()
+        dist = ndimage.distance_transform_edt(~edges)
+        np.testing.assert_allclose(edge.to_numpy(), 0.5 * (1 - dist / dist.max()), atol=1e-5)
+    solver.close()
