@@ -39,7 +39,7 @@ def gaussian_taps(sigma, half_width=None):
 
 
 #: B_occ is filtered this many disparity planes at a time (its scratch).
-CHUNK = 8
+CHUNK = 4
 
 
 @ti.data_oriented
@@ -62,7 +62,7 @@ class BoundaryCosts:
 
     def setup(self):
         """Allocate the distance-transform scratch; call once the pool is finalised."""
-        budget = 4 * self.H * self.W              # elements: a few planes
+        budget = 2 * self.H * self.W              # elements per line buffer: two planes
         self._edt3 = DistanceTransform((self.H, self.W, self.C), max_scratch=budget)
         self._edt2 = DistanceTransform((self.H, self.W, 1), max_scratch=budget)
 
