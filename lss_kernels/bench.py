@@ -20,6 +20,7 @@ Examples
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import json
 import math
@@ -566,7 +567,10 @@ def main_bench(args) -> int:
     if args.in_process and len(threads) > 1:
         raise ValueError("--in-process: one thread setting only (re-initialising Taichi "
                          "invalidates fields; the default runs a process per configuration)")
-    backend.init(arch=args.arch, threads=threads[0], offline_cache=not args.cold)
+    # with --json, stdout carries the one JSON object: Taichi's "Starting on arch" line
+    # goes to stderr
+    with contextlib.redirect_stdout(sys.stderr) if args.json else contextlib.nullcontext():
+        backend.init(arch=args.arch, threads=threads[0], offline_cache=not args.cold)
     log = (lambda *a: print(*a, file=sys.stderr, flush=True)) if args.json else print
     result = run_benchmark(quick=args.quick, arch=args.arch, threads=threads, out=args.out,
                            log=log, isolate=not args.in_process, cold=args.cold)

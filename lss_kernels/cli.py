@@ -17,8 +17,12 @@ import sys
 import tempfile
 import time
 
-from . import __version__
-from .backend import ARCHES
+if "--json" in sys.argv[1:]:
+    # stdout carries one JSON object: no Taichi banner when backend imports Taichi
+    os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
+
+from . import __version__  # noqa: E402
+from .backend import ARCHES  # noqa: E402
 
 __all__ = ["main"]
 

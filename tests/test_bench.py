@@ -43,6 +43,22 @@ def test_device_bandwidth_copies_through_a_kernel(ti_arch):
     assert math.isfinite(gbs) and gbs > 0.1
 
 
+def test_cli_json_keeps_stdout_to_one_json_object(tmp_path):
+    """`lss bench --json`: Taichi's import banner and its "Starting on arch" line stay off
+    stdout (run in a fresh process, where both would be printed; the benchmark is stubbed)."""
+    import subprocess
+    import sys
+    code = ("import sys; sys.argv = ['lss', 'bench', '--json', '--in-process'];"
+            "import lss_kernels.cli as cli, lss_kernels.bench as b;"
+            "b.run_benchmark = lambda **k: {'stub': True}; b.summary = lambda r: r;"
+            "sys.exit(cli.main(sys.argv[1:]))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout) == {"stub": True}
+    assert "Starting on arch" in proc.stderr
+
+
 def test_plan_merges_repeated_configurations():
     configs = bench.plan(quick=True, threads=[2, 1])
     keys = [(c["width"], c["height"], c["d_max"], c["threads"]) for c in configs]
