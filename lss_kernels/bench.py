@@ -467,7 +467,8 @@ def report(result):
     lines.append(f"arch: {result['arch']}, cpu_count: {result['cpu_count']}, quick: "
                  f"{result['quick']}, one process per configuration: {result['isolated']}, "
                  f"offline cache: {result['offline_cache']}; memory bandwidth "
-                 f"({result.get('bandwidth_source', 'numpy copy')}, read + write): {result['bandwidth_gbs']:.1f} GB/s; peak RSS "
+                 f"({result.get('bandwidth_source', 'numpy copy')}, read + write): "
+                 f"{result['bandwidth_gbs']:.1f} GB/s; peak RSS "
                  f"{result['maxrss_bytes'] / 2 ** 20:.0f} MiB; run time "
                  f"{result.get('seconds', float('nan')):.0f} s.")
     lines += ["", "## Per configuration (ms per iteration; setup and compile in s)", "",

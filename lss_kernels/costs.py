@@ -57,24 +57,25 @@ class BoundaryCosts:
         # scratch, kept for the solver's life: destroying an SNode tree makes Taichi drop
         # every compiled kernel, which a reset solver would then compile again
         self._chunk = pool.field(ti.f32, (H, W, min(C, CHUNK)))   # B_occ, CHUNK planes at a time
-        self._dist2 = pool.field(ti.f32, (H, W, 1))
-        self._edt3 = self._edt2 = None
+        self._edt3 = None
+        self._edt2 = self._dist2 = None
 
-    def setup(self):
-        """Allocate the distance-transform scratch; call once the pool is finalised."""
+    def setup(self, distance, distance_map):
+        """Allocate B_occ's distance-transform scratch; call once the pool is finalised.
+        B_mono borrows the level set's 2-D transform ``distance`` and its ``(H, W, 1)``
+        ``distance_map`` (set-up runs before any re-initialisation)."""
         budget = 2 * self.H * self.W              # elements per line buffer: two planes
         self._edt3 = DistanceTransform((self.H, self.W, self.C), max_scratch=budget)
-        self._edt2 = DistanceTransform((self.H, self.W, 1), max_scratch=budget)
+        self._edt2, self._dist2 = distance, distance_map
 
     def destroy(self):
-        for edt in (self._edt3, self._edt2):
-            if edt is not None:
-                edt.destroy()
-        self._edt3 = self._edt2 = None
+        if self._edt3 is not None:
+            self._edt3.destroy()
+        self._edt3 = None
 
     @property
     def scratch_bytes(self):
-        return sum(e.nbytes for e in (self._edt3, self._edt2) if e is not None)
+        return self._edt3.nbytes if self._edt3 is not None else 0
 
     # -------------------------------------------------------------------- B_occ
     @ti.func

@@ -33,6 +33,7 @@ import numpy as np
 
 from . import io, metrics
 from .baselines import METHODS as BASELINES, require_opencv
+from .params import c_max
 
 __all__ = ["COLUMNS", "METHOD_NAMES", "add_cli", "main_eval", "run_eval"]
 
@@ -63,12 +64,12 @@ _SOLVER = {}
 
 
 def _solve(scene: io.Scene, params):
-    from .solver import Solver, _c_max
+    from .solver import Solver
     if scene.init_ellipse_cyclopean is not None:
         init, frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
     else:
         init, frame = tuple(scene.init_ellipse), "left"
-    key = (scene.left.shape[:2], _c_max(scene.d_max), params)
+    key = (scene.left.shape[:2], c_max(scene.d_max), params)
     solver = _SOLVER.get(key)
     if solver is None:
         _release_solver()
@@ -93,9 +94,9 @@ def _solver_key(task):
     try:
         meta = json.loads((scene_dir / "meta.json").read_text())
         shape = iio.improps(scene_dir / "left.png").shape[:2]
-        return (0, tuple(shape), int(np.ceil(float(meta["d_max"]) / 2)), str(scene_dir))
+        return (0, tuple(shape), c_max(meta["d_max"]), str(scene_dir))
     except Exception:           # unreadable scenes fail later, with load_scene's message
-        return (1, (), 0.0, str(scene_dir))
+        return (1, (), 0, str(scene_dir))
 
 
 def _run_method(method: str, scene: io.Scene, params):

@@ -179,21 +179,22 @@ class LevelSet:
             self._network = median_network(self.median_size)
             self._columns = pool.vector(self.median_size, ti.f32, (H, W))
         self.scale = float(params.phi_scale)
-        self._sd = pool.field(ti.f32, (H, W, 1))
-        self._edt = None
+        # squared distances of the re-initialisation (also B_mono's scratch, see costs)
+        self.distance_map = pool.field(ti.f32, (H, W, 1))
+        self.distance = None
 
     def setup(self):
         """Allocate the re-initialisation scratch; call once the pool is finalised."""
-        self._edt = DistanceTransform((self.H, self.W, 1))
+        self.distance = DistanceTransform((self.H, self.W, 1))
 
     @property
     def scratch_bytes(self):
-        return self._edt.nbytes if self._edt is not None else 0
+        return self.distance.nbytes if self.distance is not None else 0
 
     def destroy(self):
-        if self._edt is not None:
-            self._edt.destroy()
-            self._edt = None
+        if self.distance is not None:
+            self.distance.destroy()
+            self.distance = None
 
     # ---------------------------------------------------------------- helpers
     @ti.func
@@ -424,7 +425,7 @@ class LevelSet:
     def _features(self, src: ti.template(), foreground: ti.i32):
         for y, x in src:
             inside = src[y, x] > 0
-            self._sd[y, x, 0] = 0.0 if inside == (foreground == 1) else INF
+            self.distance_map[y, x, 0] = 0.0 if inside == (foreground == 1) else INF
 
     @ti.kernel
     def _signed(self, phi: ti.template(), foreground: ti.i32, scale: ti.f32):
@@ -435,7 +436,7 @@ class LevelSet:
             inside = phi[y, x] > 0
             if inside == (foreground == 1):
                 # d >= 1 (measured to the nearest pixel of the other region): signs are kept
-                d = ti.min(ti.sqrt(self._sd[y, x, 0]), cap)
+                d = ti.min(ti.sqrt(self.distance_map[y, x, 0]), cap)
                 phi[y, x] = (scale if foreground == 1 else -scale) * (d - 0.5)
 
     def reinitialise(self, phi):
@@ -443,7 +444,7 @@ class LevelSet:
         so the region, are kept)."""
         for region in (1, 0):
             self._features(phi, 1 - region)  # distance to the pixels of the other region
-            self._edt.run(self._sd)
+            self.distance.run(self.distance_map)
             self._signed(phi, region, self.scale)
 
     def median(self, src, dst):

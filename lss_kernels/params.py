@@ -13,6 +13,12 @@ import math
 from dataclasses import dataclass, field
 
 
+def c_max(d_max) -> int:
+    """The cyclopean search range for a left-view ``d_max``: candidates c = 1 ..
+    ``ceil(d_max / 2)``, at least 1."""
+    return max(1, int(math.ceil(float(d_max) / 2.0)))
+
+
 @dataclass(frozen=True)
 class Params:
     """Every tunable of the solver.

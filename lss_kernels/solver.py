@@ -28,7 +28,7 @@ from .costs import BoundaryCosts
 from .hierarchy import PatchHierarchy
 from .levelset import LevelSet
 from .occlusion import OcclusionGeometry
-from .params import Params
+from .params import Params, c_max
 from .shapes import GlobalShapes
 
 __all__ = ["Result", "Solver", "solve"]
@@ -111,7 +111,7 @@ class Solver:
         left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
                                                 self.params)
         self.H, self.W = left.shape[:2]
-        self.c_max = _c_max(d_max)
+        self.c_max = c_max(d_max)
         self.profile = profile
         H, W, C = self.H, self.W, self.c_max
 
@@ -130,7 +130,7 @@ class Solver:
         self.weight_bg = pool.field(ti.f32, (H, W))
         pool.finalize()
         self.levelset.setup()
-        self.costs.setup()
+        self.costs.setup(self.levelset.distance, self.levelset.distance_map)
         self._load(left, right, d_max, init, init_frame, t_start)
 
     def reset(self, left, right, d_max, init, init_frame="left"):
@@ -146,7 +146,7 @@ class Solver:
             raise RuntimeError("reset: the solver is closed; build a new Solver")
         left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
                                                 self.params)
-        if left.shape[:2] != (self.H, self.W) or _c_max(d_max) != self.c_max:
+        if left.shape[:2] != (self.H, self.W) or c_max(d_max) != self.c_max:
             raise ValueError(f"reset: expected a {self.W}x{self.H} pair with ceil(d_max / 2) "
                              f"= {self.c_max} (this solver's fields), got "
                              f"{left.shape[1]}x{left.shape[0]} with d_max {d_max}; build a "
@@ -401,11 +401,6 @@ class Solver:
         if self.pool is None:
             return 0
         return self.pool.nbytes + self.levelset.scratch_bytes + self.costs.scratch_bytes
-
-
-def _c_max(d_max):
-    """The cyclopean search range: ``ceil(d_max / 2)`` candidates, at least 1."""
-    return max(1, int(np.ceil(float(d_max) / 2.0)))
 
 
 def _shift_columns(mask, shift):
