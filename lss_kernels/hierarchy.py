@@ -8,9 +8,10 @@ is the pixels).  Everything a patch needs is relayed between parents and childre
 * **upward**: the patch-mean matching cost C_p(c) (once, at set-up), the patch mean of the
   current disparity D, and the extremes of phi and phi(x + delta_theta) that decide the
   validity w_p (Eq. 4);
-* **messages**: d_p = argmin_c C_p(c) + beta |c - <D>_p| and sigma_p (Eq. 5), in O(1) per
-  patch from the lower envelope of the cost under the L1 cone, refined below the integer grid
-  where the matching cost has a local minimum;
+* **messages**: d_p = argmin_c C_p(c) + beta |c - <D>_p| and sigma_p (Eq. 5), from two
+  candidates per patch (the lower envelope of the cost under the L1 cone) that are searched
+  again only where the integer part of <D>_p moved, refined below the integer grid where the
+  matching cost has a local minimum;
 * **downward**: every pixel receives the sums of w_p / sigma_p^2 and w_p d_p / sigma_p^2 over
   all patches that contain it (Eq. 7), relayed from parents to children.
 
@@ -26,15 +27,6 @@ import numpy as np
 import taichi as ti
 
 __all__ = ["Level", "PatchHierarchy", "level_geometry"]
-
-
-def _index_type(c_max):
-    """Smallest integer type for 1 .. c_max where the backend stores 8/16-bit fields natively
-    (CPU, CUDA); 32-bit elsewhere (Vulkan, Metal and OpenGL need optional device features
-    for narrow integers)."""
-    if ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64, ti.cuda):
-        return ti.u8 if c_max <= 255 else ti.u16
-    return ti.i32
 
 
 class Level:
@@ -108,20 +100,16 @@ class PatchHierarchy:
         self.d_p = [pool.field(ti.f32, (H, W)) for _ in self.levels]
         self.sigma_p = [pool.field(ti.f32, (H, W)) for _ in self.levels]
         self.valid = [pool.field(ti.i32, (H, W)) for _ in self.levels]
-        # the lower envelope of C_p(c) + beta |c - m| over m (see ``_build_envelope``): per
-        # patch, the mean cost and, per candidate index k, the argmin over c <= k + 1 of
-        # C_p(c) - beta c and over c >= k + 1 of C_p(c) + beta c
-        arg_type = _index_type(C)
+        # per patch, the mean of C_p over c (for sigma_p) and the two candidates of Eq. 5 for
+        # the current (floor(m), ceil(m)) of the prior mean m (``env_key``; 0 = none): they
+        # depend on m only through that pair, so a patch scans its cost curve again only
+        # where the pair moved (after the first few iterations, < 0.1 % of the patches)
         self.cost_mean = [pool.field(ti.f32, (H, W)) for _ in self.levels]
-        self.arg_below = [pool.field(arg_type, (H, W, C)) for _ in self.levels]
-        self.arg_above = [pool.field(arg_type, (H, W, C)) for _ in self.levels]
-        # per patch, the two candidates read from the envelope for the current (floor(m),
-        # ceil(m)) (``env_key``; 0 = none): re-read from the volumes only where that moved
         self.env_key = [pool.field(ti.i32, (H, W)) for _ in self.levels]
         self.env_arg = [pool.vector(2, ti.i32, (H, W)) for _ in self.levels]
         self.env_cost = [pool.vector(2, ti.f32, (H, W)) for _ in self.levels]
         self.env_refined = [pool.vector(2, ti.f32, (H, W)) for _ in self.levels]
-        self._envelope_beta = None
+        self._cached_beta = None
         # downward relays of (w / sigma^2, w d / sigma^2)
         self.relay = [padded(lev, 2) for lev in self.levels]
         # the consensus (Eq. 7)
@@ -196,9 +184,19 @@ class PatchHierarchy:
         for i in range(1, len(self.levels)):
             self._cost_from_children(self.cost[i - 1], self.count[i - 1], self.cost[i],
                                      self.count[i], self.levels[i].offsets)
-        for vol in self.cost:
+        for vol, mean in zip(self.cost, self.cost_mean):
             self._normalise(vol)
-        self._envelope_beta = None
+            self._mean_over_candidates(vol, mean)
+        self._cached_beta = None
+
+    @ti.kernel
+    def _mean_over_candidates(self, cost: ti.template(), cost_mean: ti.template()):
+        """mean_c C_p(c) of every in-image patch (the flat-cost baseline of sigma_p)."""
+        for y, x in cost_mean:
+            total = 0.0
+            for k in range(self.C):
+                total += cost[y, x, k]
+            cost_mean[y, x] = total / self.C
 
     # ------------------------------------------------------------------ upward, per iteration
     @ti.kernel
@@ -268,55 +266,46 @@ class PatchHierarchy:
                     r += ti.min(ti.max(0.5 * (cm - cp) / den, -0.5), 0.5)
         return r
 
-    @ti.kernel
-    def _build_envelope(self, cost: ti.template(), cost_mean: ti.template(),
-                        below: ti.template(), above: ti.template(), beta: ti.f32):
-        """Per patch, the running argmins that make Eq. 5 O(1) for any prior mean m:
+    @ti.func
+    def _side_argmins(self, cost: ti.template(), y, x, lo, hi, beta):
+        """The two candidates of Eq. 5 for a prior mean m with floor m = ``lo``, ceil m =
+        ``hi``:
 
-        min_c C_p(c) + beta |c - m| = min( min_{c <= floor m} [C_p(c) - beta c] + beta m,
-                                           min_{c >= ceil m}  [C_p(c) + beta c] - beta m ),
+        min_c C_p(c) + beta |c - m| = min( min_{c <= lo} [C_p(c) - beta c] + beta m,
+                                           min_{c >= hi} [C_p(c) + beta c] - beta m ),
 
-        the lower envelope of the cost under an L1 cone (a 1-D distance transform).
-        ``below[k]`` = argmin over c <= k + 1 of C_p(c) - beta c, ``above[k]`` = argmin over
-        c >= k + 1 of C_p(c) + beta c (ties: the smallest c), and ``cost_mean`` = mean_c C_p.
-        """
-        C = self.C
-        for y, x in cost_mean:
-            total = 0.0
-            best = 1e30
-            arg = 1
-            for k in range(C):
-                v = cost[y, x, k]
-                total += v
-                g = v - beta * (k + 1)
-                if g < best:
-                    best = g
-                    arg = k + 1
-                below[y, x, k] = ti.cast(arg, below.dtype)
-            cost_mean[y, x] = total / C
-            best = 1e30
-            arg = C
-            for j in range(C):
-                k = C - 1 - j
-                g = cost[y, x, k] + beta * (k + 1)
-                if g <= best:
-                    best = g
-                    arg = k + 1
-                above[y, x, k] = ti.cast(arg, above.dtype)
+        and neither inner argmin depends on m itself (the lower envelope of the cost under an
+        L1 cone).  Returns (argmin over c <= lo, argmin over c >= hi), 0 where the side is
+        empty; ties go to the smallest c."""
+        c_lo = 0
+        best = 1e30
+        for k in range(lo):
+            g = cost[y, x, k] - beta * (k + 1)
+            if g < best:
+                best = g
+                c_lo = k + 1
+        c_hi = 0
+        best = 1e30
+        for j in range(self.C - hi + 1):
+            k = self.C - 1 - j
+            g = cost[y, x, k] + beta * (k + 1)
+            if g <= best:
+                best = g
+                c_hi = k + 1
+        return c_lo, c_hi
 
     @ti.kernel
-    def _messages_envelope(self, cost: ti.template(), cost_mean: ti.template(),
-                           below: ti.template(), above: ti.template(), env_key: ti.template(),
-                           env_arg: ti.template(), env_cost: ti.template(),
-                           env_refined: ti.template(),
-                           count: ti.template(), d_sum: ti.template(), phi_max: ti.template(),
-                           phi_plus_min: ti.template(), d_p: ti.template(),
-                           sigma_p: ti.template(), valid: ti.template(), relay: ti.template(),
-                           beta: ti.f32, use_validity: ti.i32):
-        """Eq. 4 and Eq. 5 in O(1) per patch from the envelope: d_p and sigma_p of the full
-        scan of C_p(c) + beta |c - m| (up to float rounding of near-ties).
-        The two candidates are cached per patch and re-read from the volumes only where
-        (floor m, ceil m) moved since the last call, so an iteration streams 2-D fields."""
+    def _messages(self, cost: ti.template(), cost_mean: ti.template(), env_key: ti.template(),
+                  env_arg: ti.template(), env_cost: ti.template(), env_refined: ti.template(),
+                  count: ti.template(), d_sum: ti.template(), phi_max: ti.template(),
+                  phi_plus_min: ti.template(), d_p: ti.template(), sigma_p: ti.template(),
+                  valid: ti.template(), relay: ti.template(), beta: ti.f32,
+                  use_validity: ti.i32):
+        """Eq. 4 and Eq. 5 per patch: d_p and sigma_p of the full scan of
+        C_p(c) + beta |c - m| (up to float rounding of near-ties).  The two candidates of
+        :meth:`_side_argmins` are cached per patch and searched again only where
+        (floor m, ceil m) moved since the last call, so an iteration mostly streams 2-D
+        fields."""
         C = self.C
         for y, x in d_p:
             w = 1
@@ -332,12 +321,7 @@ class PatchHierarchy:
                 hi = ti.max(ti.cast(ti.ceil(m), ti.i32), 1)  # ... and c >= hi
                 key = 2 * lo + 1 + ti.cast(hi == lo, ti.i32)
                 if env_key[y, x] != key:
-                    c_lo = 0
-                    c_hi = 0
-                    if lo >= 1:
-                        c_lo = ti.cast(below[y, x, lo - 1], ti.i32)
-                    if hi <= C:
-                        c_hi = ti.cast(above[y, x, hi - 1], ti.i32)
+                    c_lo, c_hi = self._side_argmins(cost, y, x, lo, hi, beta)
                     env_arg[y, x] = ti.Vector([c_lo, c_hi])
                     env_cost[y, x] = ti.Vector([cost[y, x, ti.max(c_lo, 1) - 1],
                                                 cost[y, x, ti.max(c_hi, 1) - 1]])
@@ -376,27 +360,24 @@ class PatchHierarchy:
     def messages(self, beta, use_prior, use_validity):
         """Per-patch (d_p, sigma_p) and w_p at every level; seeds the downward relays.
 
-        The messages come in O(1) per patch from the lower envelope of each patch's cost
-        (built once per prior weight, O(c_max) per patch), with validity from Eq. 4 if
-        ``use_validity``.  Without the prior (the first iteration) the weight is 0: the
-        envelope's two candidates then cover every c, so d_p is the plain argmin and every
-        patch is valid."""
+        A patch scans its cost curve (O(c_max)) only when floor or ceil of its prior mean
+        moved, or the prior weight changed; otherwise its message is O(1) from the cached
+        candidates.  Validity from Eq. 4 if ``use_validity``.  Without the prior (the first
+        iteration) the weight is 0: the two candidates then cover every c, so d_p is the
+        plain argmin and every patch is valid."""
         beta = float(beta) if use_prior else 0.0
         if not use_prior and use_validity:
             raise ValueError("messages: validity needs the prior (iteration >= 2)")
-        if self._envelope_beta != beta:
-            for i in range(len(self.levels)):
-                self._build_envelope(self.cost[i], self.cost_mean[i], self.arg_below[i],
-                                     self.arg_above[i], beta)
-                self.env_key[i].fill(0)
-            self._envelope_beta = beta
+        if self._cached_beta != beta:
+            for key in self.env_key:
+                key.fill(0)
+            self._cached_beta = beta
         for i in range(len(self.levels)):
-            self._messages_envelope(self.cost[i], self.cost_mean[i], self.arg_below[i],
-                                    self.arg_above[i], self.env_key[i], self.env_arg[i],
-                                    self.env_cost[i], self.env_refined[i], self.count[i],
-                                    self.d_sum[i], self.phi_max[i], self.phi_plus_min[i],
-                                    self.d_p[i], self.sigma_p[i], self.valid[i], self.relay[i],
-                                    beta, int(use_validity))
+            self._messages(self.cost[i], self.cost_mean[i], self.env_key[i], self.env_arg[i],
+                           self.env_cost[i], self.env_refined[i], self.count[i],
+                           self.d_sum[i], self.phi_max[i], self.phi_plus_min[i],
+                           self.d_p[i], self.sigma_p[i], self.valid[i], self.relay[i],
+                           beta, int(use_validity))
 
     # ------------------------------------------------------------------ downward (Eq. 7)
     @ti.kernel

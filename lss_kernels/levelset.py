@@ -161,9 +161,9 @@ class LevelSet:
         self.phi = f()
         self.phi_next = f()
         self.phi_x, self.phi_y = f(), f()
-        self.phi_xx, self.phi_yy, self.phi_xy = f(), f(), f()
         self.kappa, self.normal_x, self.normal_y = f(), f(), f()
-        self.b_map, self.b_x, self.b_y = f(), f(), f()
+        self.b_map = f()
+        # row-filtered scratch of the separable filters (phi: three orders; B: two)
         self._t0, self._t1, self._t2 = f(), f(), f()
         self.flipped = pool.field(ti.i32, ())
         self.changed = pool.field(ti.i32, ())
@@ -264,16 +264,23 @@ class LevelSet:
             self._t2[y, x] = v[2]
 
     @ti.kernel
-    def _columns5(self):
-        """Along y: the five derivatives of phi from the row-filtered scratch fields."""
+    def _columns_curvature(self):
+        """Along y: the five derivatives of phi from the row-filtered scratch, and from them
+        phi_x, phi_y, the clipped curvature kappa = div(grad phi / |grad phi|) and the normal
+        N = grad phi / |grad phi| (the second derivatives are used here only)."""
+        clip = self.curvature_clip
         for y, x in self.phi:
             v0 = self._filters(self._t0, y, x, 0, (1, 2))
             v1 = self._filters(self._t1, y, x, 0, (0, 1))
-            self.phi_x[y, x] = v1[0]
-            self.phi_y[y, x] = v0[0]
-            self.phi_xx[y, x] = self._filters(self._t2, y, x, 0, (0,))[0]
-            self.phi_yy[y, x] = v0[1]
-            self.phi_xy[y, x] = v1[1]
+            pxx = self._filters(self._t2, y, x, 0, (0,))[0]
+            px, py, pyy, pxy = v1[0], v0[0], v0[1], v1[1]
+            norm = ti.sqrt(px * px + py * py) + 1e-10
+            k = (pxx * py * py - 2.0 * px * py * pxy + pyy * px * px) / (norm * norm * norm)
+            self.phi_x[y, x] = px
+            self.phi_y[y, x] = py
+            self.kappa[y, x] = ti.min(ti.max(k, -clip), clip)
+            self.normal_x[y, x] = px / norm
+            self.normal_y[y, x] = py / norm
 
     @ti.kernel
     def _rows2(self, src: ti.template()):
@@ -282,35 +289,10 @@ class LevelSet:
             self._t0[y, x] = v[0]
             self._t1[y, x] = v[1]
 
-    @ti.kernel
-    def _columns2(self, gx: ti.template(), gy: ti.template()):
-        for y, x in gx:
-            gx[y, x] = self._filters(self._t1, y, x, 0, (0,))[0]
-            gy[y, x] = self._filters(self._t0, y, x, 0, (1,))[0]
-
-    def gradient(self, src, gx, gy):
-        """Gaussian-derivative gradient of an ``(H, W)`` field."""
-        self._rows2(src)
-        self._columns2(gx, gy)
-
-    @ti.kernel
-    def _curvature(self):
-        clip = self.curvature_clip
-        for y, x in self.phi:
-            px, py = self.phi_x[y, x], self.phi_y[y, x]
-            g2 = px * px + py * py
-            norm = ti.sqrt(g2) + 1e-10
-            k = (self.phi_xx[y, x] * py * py - 2.0 * px * py * self.phi_xy[y, x]
-                 + self.phi_yy[y, x] * px * px) / (norm * norm * norm)
-            self.kappa[y, x] = ti.min(ti.max(k, -clip), clip)
-            self.normal_x[y, x] = px / norm
-            self.normal_y[y, x] = py / norm
-
     def derivatives(self):
         """phi_x, phi_y, kappa and N from the current phi."""
         self._rows3(self.phi)
-        self._columns5()
-        self._curvature()
+        self._columns_curvature()
 
     # ---------------------------------------------------------------- boundary weight
     @ti.kernel
@@ -320,9 +302,10 @@ class LevelSet:
             self.b_map[y, x] = costs.b_at(y, x, c)
 
     def boundary_weight(self, costs, shapes):
-        """B(x, y, Theta_1(x, y)) and its gradient."""
+        """B(x, y, Theta_1(x, y)) and the row pass of its gradient (the column pass runs in
+        the Eq. 2 step, which alone needs grad B)."""
         self._b_map(costs, shapes)
-        self.gradient(self.b_map, self.b_x, self.b_y)
+        self._rows2(self.b_map)
 
     # ---------------------------------------------------------------- Eq. 2
     @ti.func
@@ -350,8 +333,11 @@ class LevelSet:
             p = self.phi[y, x]
             m1 = self._cost_at(cost, y, xf, shapes.value(0, xf, yf), C)
             m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x], shapes.value(1, xf, yf), C)
+            # grad B: the column pass of the separable filters (rows in ``_rows2``)
+            b_x = self._filters(self._t1, y, x, 0, (0,))[0]
+            b_y = self._filters(self._t0, y, x, 0, (1,))[0]
             bt = self.b_map[y, x] * self.kappa[y, x] + \
-                self.normal_x[y, x] * self.b_x[y, x] + self.normal_y[y, x] * self.b_y[y, x]
+                self.normal_x[y, x] * b_x + self.normal_y[y, x] * b_y
             bt = ti.min(ti.max(bt, -clip), clip)
             dirac = (1.0 / math.pi) / (1.0 + p * p)
             self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt)
@@ -394,13 +380,30 @@ class LevelSet:
                 v[i] = runs[ti.static(slots[i][0])][ti.static(slots[i][1])]
         return v
 
+    @ti.func
+    def _store(self, dst: ti.template(), y, x, value, count: ti.template()):
+        """dst[y, x] = value; with ``count``, first tally the sign flip against dst's previous
+        value and the new foreground."""
+        if ti.static(count):
+            now = value > 0
+            if now != (dst[y, x] > 0):
+                self.flipped[None] += 1
+            if now:
+                self.area[None] += 1
+        dst[y, x] = value
+
     @ti.kernel
     def _median_of_columns(self, dst: ti.template(), k: ti.template(), shared: ti.template(),
-                           final: ti.template()):
+                           final: ti.template(), count: ti.template()):
         """Stages 2 and 3: the medians at (y, x) and (y, x + 1), x even, from the sorted
-        columns (the k - 1 columns both windows hold are merged once)."""
+        columns (the k - 1 columns both windows hold are merged once).  With ``count``,
+        ``flipped`` and ``area`` count the sign changes against dst's previous content and
+        the pixels > 0."""
         shared_slots, shared_ops, survivors = ti.static(shared)
         final_slots, final_ops, index = ti.static(final)
+        if ti.static(count):
+            self.flipped[None] = 0
+            self.area[None] = 0
         for y, pair in ti.ndrange(self.H, (self.W + 1) // 2):
             x = 2 * pair
             columns = [self._columns[y, self._reflect(x + c - k // 2 + 1, self.W)]
@@ -412,9 +415,9 @@ class LevelSet:
                 own = self._columns[y, self._reflect(x + side * k - k // 2, self.W)]
                 median = self._apply(self._load(final_slots, [kept, own]), final_ops)[index]
                 if ti.static(side == 0):
-                    dst[y, x] = median
+                    self._store(dst, y, x, median, count)
                 elif x + 1 < self.W:
-                    dst[y, x + 1] = median
+                    self._store(dst, y, x + 1, median, count)
 
     @ti.kernel
     def _copy(self, src: ti.template(), dst: ti.template()):
@@ -447,25 +450,25 @@ class LevelSet:
             self.distance.run(self.distance_map)
             self._signed(phi, region, self.scale)
 
-    def median(self, src, dst):
+    def median(self, src, dst, count=False):
+        """dst = the ``median_size``-square median of src (symmetric borders); with
+        ``count``, also the sign flips against dst's previous content (``flipped``) and the
+        pixels > 0 (``area``)."""
         k = self.median_size
         if k == 1:
-            self._copy(src, dst)
+            self._copy_counting(src, dst, count)
             return
         column_ops, shared, final = self._network
         self._sort_columns(src, k, column_ops)
-        self._median_of_columns(dst, k, shared, final)
+        self._median_of_columns(dst, k, shared, final, count)
 
     @ti.kernel
-    def _count_flips(self, before: ti.template()):
-        self.flipped[None] = 0
-        self.area[None] = 0
-        for y, x in self.phi:
-            now = self.phi[y, x] > 0
-            if now != (before[y, x] > 0):
-                self.flipped[None] += 1
-            if now:
-                self.area[None] += 1
+    def _copy_counting(self, src: ti.template(), dst: ti.template(), count: ti.template()):
+        if ti.static(count):
+            self.flipped[None] = 0
+            self.area[None] = 0
+        for y, x in dst:
+            self._store(dst, y, x, src[y, x], count)
 
     @ti.kernel
     def net_change(self):
@@ -480,14 +483,12 @@ class LevelSet:
 
     def evolve(self, cost, c_max, shapes, occ, params, reinit):
         """One descent step of Eq. 2, then (every ``reinit_every``) the signed-distance
-        re-initialisation and the median filter.  Leaves the previous phi in ``phi_next`` and
-        counts the pixels whose sign flipped."""
+        re-initialisation and the median filter; counts the pixels whose sign flipped and the
+        foreground area."""
         self._step(cost, c_max, shapes, occ, params.dt, params.mu)
         if reinit:
             self.reinitialise(self.phi_next)
-        self._copy(self.phi, self._t1)      # the previous phi, for the flip count
-        self.median(self.phi_next, self.phi)
-        self._count_flips(self._t1)
+        self.median(self.phi_next, self.phi, count=True)
 
     @ti.kernel
     def _from_mask(self, mask: ti.types.ndarray()):
