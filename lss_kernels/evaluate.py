@@ -9,6 +9,8 @@ run with the paper's protocol (:func:`lss_kernels.metrics.score`) and writes, un
     results.csv                           one row per scene and method, then a mean per method
     table.md                              occlusion F1 per scene and method beside the paper's
     panels/<scene>.png                    left image, true and estimated disparities
+    convergence.csv / .md / .png          with ``trace``: lss scored at every stop window,
+                                          and variants of the stopping rule replayed
 
 A run whose ``result.json`` exists is not repeated (the evaluation can be interrupted and
 resumed) unless ``force`` is set.  ``results.csv``, ``table.md`` and the panels describe the
@@ -63,7 +65,10 @@ def _init_worker(arch: str, threads: int, methods) -> None:
 _SOLVER = {}
 
 
-def _solve(scene: io.Scene, params):
+def _solve(scene: io.Scene, params, trace: bool = False):
+    """Solve a scene with this process's solver; with ``trace``, also score the left view
+    at the end of every stop window and at the last iteration.  Returns the result, the
+    trace rows and the seconds spent scoring them."""
     from .solver import Solver
     if scene.init_ellipse_cyclopean is not None:
         init, frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
@@ -78,7 +83,19 @@ def _solve(scene: io.Scene, params):
         _SOLVER[key] = solver
     else:
         solver.reset(scene.left, scene.right, scene.d_max, init, init_frame=frame)
-    return solver.run()
+    rows, spent = [], [0.0]
+
+    def record(s, stats):
+        if s.iteration % s.params.stop_window == 0 or s.done:
+            start = time.perf_counter()
+            disparity, occlusion, _ = s.left_view()
+            score = metrics.score(disparity, occlusion, scene)
+            rows.append({"iteration": s.iteration, "moving_fraction": stats["moving_fraction"],
+                         "fg_fraction": stats["fg_fraction"],
+                         "occ_f1": float(score["occ_f1"]), "bad4": float(score["bad4"])})
+            spent[0] += time.perf_counter() - start
+
+    return solver.run(record if trace else None), rows, spent[0]
 
 
 def _release_solver() -> None:
@@ -99,22 +116,26 @@ def _solver_key(task):
         return (1, (), 0, str(scene_dir))
 
 
-def _run_method(method: str, scene: io.Scene, params):
-    """Disparity and occlusion (left view) of one method on one scene, and extra facts."""
+def _run_method(method: str, scene: io.Scene, params, trace: bool = False):
+    """Disparity and occlusion (left view) of one method on one scene, extra facts, and the
+    seconds spent on the trace."""
     if method == "lss":
-        result = _solve(scene, params)
+        result, rows, spent = _solve(scene, params, trace)
         extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason)}
-        return result.disparity, result.occlusion, extra
+        if trace:
+            extra["trace"] = rows
+        return result.disparity, result.occlusion, extra, spent
     disparity, occlusion = BASELINES[method](scene.left, scene.right, scene.d_max)
-    return disparity, occlusion, {}
+    return disparity, occlusion, {}, 0.0
 
 
-def _run_one(scene_dir: str, method: str, run_dir: str, params) -> dict:
-    """Run, score and save one (scene, method); return the record written to result.json."""
+def _run_one(scene_dir: str, method: str, run_dir: str, params, trace: bool = False) -> dict:
+    """Run, score and save one (scene, method); return the record written to result.json
+    (``seconds`` leaves out the scoring of a trace)."""
     scene = io.load_scene(scene_dir)
     start = time.perf_counter()
-    disparity, occlusion, extra = _run_method(method, scene, params)
-    seconds = time.perf_counter() - start
+    disparity, occlusion, extra, spent = _run_method(method, scene, params, trace)
+    seconds = time.perf_counter() - start - spent
     disparity = np.asarray(disparity, dtype=np.float32)
     occlusion = np.asarray(occlusion, dtype=bool)
     scores = {k: _plain(v) for k, v in metrics.score(disparity, occlusion, scene).items()}
@@ -155,7 +176,7 @@ def _check_methods(methods) -> tuple:
 
 def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs: int = 1,
              force: bool = False, arch: str = "cpu", params=None,
-             progress: bool = True) -> list:
+             progress: bool = True, trace: bool = False) -> list:
     """Run ``methods`` on every scene of ``dataset_dir``, score them and write the report.
 
     Parameters
@@ -179,6 +200,11 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
         Solver parameters for ``lss`` (``None``: the paper's defaults).
     progress : bool
         Print one line per finished (scene, method) to stderr.
+    trace : bool
+        Also score ``lss`` at the end of every stop window (its ``result.json`` gets a
+        ``trace``) and write ``convergence.csv``, ``convergence.md`` (accuracy against
+        iterations, and where variants of the stopping rule would have stopped) and
+        ``convergence.png``.  The scoring is left out of ``seconds``.
 
     Returns
     -------
@@ -213,7 +239,8 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
                 records[scene_dir.name, method] = {**json.loads(done.read_text()),
                                                    "skipped": True}
             else:
-                todo.append((os.fspath(scene_dir), method, os.fspath(run_dir), params))
+                todo.append((os.fspath(scene_dir), method, os.fspath(run_dir), params,
+                             trace and method == "lss"))
 
     total = len(names) * len(methods)
     log = _Progress(total, enabled=progress)
@@ -233,6 +260,10 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
         panel = out / "panels" / f"{scene_dir.name}.png"
         if any((scene_dir.name, m) in fresh for m in methods) or not panel.exists():
             _write_panel(panel, scene_dir, [records[scene_dir.name, m] for m in methods], out)
+    traced = [r for r in rows if r["method"] == "lss" and r.get("trace")]
+    if trace and traced:
+        from .params import Params
+        _write_convergence(out, traced, params if params is not None else Params())
     return rows
 
 
@@ -360,6 +391,66 @@ def _write_table(path: Path, rows, names, methods, dataset_dir: Path) -> None:
     path.write_text("\n".join(text) + "\n")
 
 
+#: Variants of the stopping rule that ``convergence.md`` replays, as multiples of the run's
+#: ``stop_fraction`` and ``min_iterations``.
+RULE_VARIANTS = ((1.0, 1.0), (1.0, 0.5), (1.5, 1.0), (1.5, 0.5), (2.5, 1.0), (5.0, 1.0))
+
+
+def _write_convergence(out: Path, records, params) -> None:
+    """convergence.csv / .md / .png from the traces of ``lss`` runs (see ``run_eval``)."""
+    from . import viz
+    from .stopping import replay
+    keys = ("iteration", "moving_fraction", "fg_fraction", "occ_f1", "bad4")
+    with open(out / "convergence.csv", "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(("scene",) + keys)
+        for r in records:
+            for row in r["trace"]:
+                writer.writerow([r["scene"]] + [f"{row[k]:.6g}" for k in keys])
+
+    last = max(r["trace"][-1]["iteration"] for r in records)
+    marks = list(range(100, last + 1, 100))
+    text = ["# Accuracy against iterations (lss)", "",
+            "Occlusion F1 at every 100 iterations (blank: the run had stopped) and at the "
+            "run's own stop.", "",
+            "| scene | " + " | ".join(str(m) for m in marks) + " | stop | F1 |",
+            "|---|" + "---|" * (len(marks) + 2)]
+    for r in records:
+        at = {row["iteration"]: row["occ_f1"] for row in r["trace"]}
+        cells = [f"{at[m]:.2f}" if m in at else "" for m in marks]
+        text.append(f"| {r['scene']} | " + " | ".join(cells)
+                    + f" | {r['trace'][-1]['iteration']} | {r['trace'][-1]['occ_f1']:.2f} |")
+    text += ["", "## Variants of the stopping rule, replayed on these runs", "",
+             f"The runs used stop_fraction {params.stop_fraction}, min_iterations "
+             f"{params.min_iterations}, stop_window {params.stop_window}, stop_patience "
+             f"{params.stop_patience}. A variant can only be replayed up to where the run "
+             "stopped: *ended* counts the runs whose record ended before the variant fired.",
+             "", "| stop_fraction | min_iterations | median iterations | total iterations | "
+             "mean F1 | mean bad-4.0 (%) | ended |", "|---|---|---|---|---|---|---|"]
+    for f_scale, m_scale in RULE_VARIANTS:
+        change = dict(stop_fraction=params.stop_fraction * f_scale,
+                      min_iterations=max(1, int(params.min_iterations * m_scale)))
+        stops = [replay(r["trace"], params, **change) for r in records]
+        its = [e["iteration"] for e, _ in stops]
+        text.append(f"| {change['stop_fraction']:.4g} | {change['min_iterations']} | "
+                    f"{np.median(its):.0f} | {sum(its)} | "
+                    f"{np.mean([e['occ_f1'] for e, _ in stops]):.4f} | "
+                    f"{np.mean([e['bad4'] for e, _ in stops]):.2f} | "
+                    f"{sum(not fired for _, fired in stops)} |")
+    (out / "convergence.md").write_text("\n".join(text) + "\n")
+
+    fig = viz.new_figure(720, 420)
+    ax = fig.add_axes((0.08, 0.12, 0.62, 0.8))
+    for r in records:
+        ax.plot([row["iteration"] for row in r["trace"]],
+                [row["occ_f1"] for row in r["trace"]], label=r["scene"], linewidth=1)
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("occlusion F1")
+    ax.set_ylim(0, 1)
+    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    viz.save_figure(fig, out / "convergence.png")
+
+
 def _write_panel(path: Path, scene_dir: Path, records, out: Path) -> None:
     """Left image, true disparity and each method's disparity with occlusions in dark blue."""
     from . import viz
@@ -411,6 +502,9 @@ def add_cli(subparsers) -> None:
     p.add_argument("--force", action="store_true", help="recompute finished runs")
     p.add_argument("--arch", default="cpu", choices=ARCHES,
                    help="Taichi arch for lss (default: %(default)s)")
+    p.add_argument("--trace", action="store_true",
+                   help="score lss at the end of every stop window; writes convergence.csv, "
+                        ".md (with variants of the stopping rule replayed) and .png")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=main_eval)
 
@@ -421,7 +515,8 @@ def main_eval(args) -> int:
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     try:
         rows = run_eval(args.dataset_dir, methods=methods, out=args.out, jobs=args.jobs,
-                        force=args.force, arch=args.arch, progress=not args.quiet)
+                        force=args.force, arch=args.arch, progress=not args.quiet,
+                        trace=args.trace)
     except (ValueError, FileNotFoundError, ImportError) as error:
         print(f"lss eval: error: {error}", file=sys.stderr)
         return 2

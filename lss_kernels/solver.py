@@ -1,4 +1,5 @@
-"""The alternation of Sec. 3 and the stopping rule; the public ``solve`` / ``Solver`` / ``Result``.
+"""The alternation of Sec. 3 (stopping: :mod:`lss_kernels.stopping`); the public ``solve`` /
+``Solver`` / ``Result``.
 
 One iteration (as in the authors' release, with everything a data-parallel kernel):
 
@@ -30,6 +31,7 @@ from .levelset import LevelSet
 from .occlusion import OcclusionGeometry
 from .params import Params, c_max
 from .shapes import GlobalShapes
+from .stopping import StopRule
 
 __all__ = ["Result", "Solver", "solve"]
 
@@ -175,7 +177,7 @@ class Solver:
         self.stop_reason = None
         self.history = []
         self._moving = 1.0
-        self._quiet = 0          # consecutive stop windows below params.stop_fraction
+        self._rule = StopRule(self.params)
         self.levelset.net_change()
         self._t_loop = 0.0
         self.timings["setup_total"] = time.perf_counter() - t_start
@@ -285,10 +287,10 @@ class Solver:
         area = int(ls.area[None])
         seconds = time.perf_counter() - t_iter
         self._t_loop += seconds
-        if self.iteration % p.stop_window == 0:
+        if self._rule.is_window_end(self.iteration):
             ls.net_change()
             self._moving = int(ls.changed[None]) / max(area, 1)
-            self._quiet = self._quiet + 1 if self._moving < p.stop_fraction else 0
+            self._rule.record(self._moving)
         moving = self._moving
         stats = dict(iteration=self.iteration, flipped=flipped, moving_fraction=moving,
                      fg_fraction=area / float(self.H * self.W), seconds=seconds)
@@ -302,12 +304,11 @@ class Solver:
             self.stop_reason = f"foreground vanished at iteration {self.iteration}"
         elif area == self.H * self.W:
             self.stop_reason = f"foreground filled the image at iteration {self.iteration}"
-        elif (p.stop_fraction > 0 and self.iteration >= p.min_iterations
-              and self.iteration % p.stop_window == 0 and self._quiet >= p.stop_patience):
+        elif self._rule.converged(self.iteration):
             self.stop_reason = (f"converged at iteration {self.iteration}: the foreground "
                                 f"changed by {moving:.4f} of its area over the last "
                                 f"{p.stop_window} iterations (< {p.stop_fraction} in "
-                                f"{self._quiet} windows in a row)")
+                                f"{self._rule.quiet} windows in a row)")
         elif self.iteration >= p.max_iterations:
             self.stop_reason = f"reached the iteration cap ({p.max_iterations})"
         self.done = self.stop_reason is not None

@@ -163,6 +163,30 @@ def test_lss_scenes_of_one_size_share_a_solver_and_match_a_fresh_solve(dataset, 
     assert (row["occ_f1"], row["bad4"]) == (s["occ_f1"], s["bad4"])
 
 
+def test_trace_scores_every_stop_window_and_replays_the_rule(dataset, tmp_path):
+    import imageio.v3 as iio
+    from lss_kernels.stopping import replay
+    params = Params(max_iterations=40, min_iterations=10, stop_window=5, stop_fraction=0.01)
+    rows = run_eval(dataset, methods=("lss",), out=tmp_path, params=params, progress=False,
+                    trace=True)
+    n = 0
+    for row in rows:
+        trace = json.loads((tmp_path / "runs" / row["scene"] / "lss" / "result.json")
+                           .read_text())["trace"]
+        its = [t["iteration"] for t in trace]
+        assert its[-1] == row["iterations"]
+        assert all(i % params.stop_window == 0 for i in its[:-1])
+        assert trace[-1]["occ_f1"] == pytest.approx(row["occ_f1"])   # the run's own output
+        entry, _ = replay(trace, params)
+        assert entry["iteration"] == row["iterations"]
+        n += len(trace)
+    with open(tmp_path / "convergence.csv") as f:
+        assert len(list(csv.reader(f))) == n + 1
+    md = (tmp_path / "convergence.md").read_text()
+    assert "| stop_fraction | min_iterations |" in md and "| 0.01 | 10 |" in md
+    assert iio.imread(tmp_path / "convergence.png").ndim == 3
+
+
 def test_unknown_method(dataset, tmp_path):
     with pytest.raises(ValueError, match=r"unknown method\(s\) 'kz'; valid: lss, sgm, bm-lr"):
         run_eval(dataset, methods=("sgm", "kz"), out=tmp_path)

@@ -1,0 +1,81 @@
+"""The stopping rule of the alternation, and its replay over a recorded run.
+
+The paper (and the authors' release) runs a fixed number of iterations.  The solver stops
+earlier once the foreground has settled: every ``stop_window`` iterations it counts the pixels
+whose label differs from ``stop_window`` iterations before (the net change: a boundary that
+oscillates does not count) and calls the window quiet when that is below ``stop_fraction`` of
+the foreground area; it stops after ``stop_patience`` quiet windows in a row, not before
+``min_iterations`` (see :class:`lss_kernels.Params`).
+
+:func:`replay` applies the rule, or a variant of it, to the per-window record of a finished
+run (``lss eval --trace``): how many iterations another rule would have taken, and at what
+accuracy.  Taichi-free.
+"""
+import dataclasses
+
+__all__ = ["StopRule", "replay"]
+
+
+class StopRule:
+    """The convergence part of the rule (the iteration cap and a vanished or full foreground
+    are the solver's own stops).
+
+    Parameters
+    ----------
+    params : lss_kernels.Params
+        ``stop_window``, ``stop_fraction``, ``stop_patience``, ``min_iterations``.
+    """
+
+    def __init__(self, params):
+        self.window = int(params.stop_window)
+        self.fraction = float(params.stop_fraction)
+        self.patience = int(params.stop_patience)
+        self.min_iterations = int(params.min_iterations)
+        self.quiet = 0          # consecutive quiet windows
+
+    def is_window_end(self, iteration: int) -> bool:
+        return iteration % self.window == 0
+
+    def record(self, moving_fraction: float) -> None:
+        """The net change over the window that just ended, as a fraction of the foreground
+        area."""
+        self.quiet = self.quiet + 1 if moving_fraction < self.fraction else 0
+
+    def converged(self, iteration: int) -> bool:
+        """Whether to stop after ``iteration`` (windows before ``min_iterations`` count towards
+        the patience, so the rule can fire at ``min_iterations``)."""
+        return (self.fraction > 0 and iteration >= self.min_iterations
+                and self.is_window_end(iteration) and self.quiet >= self.patience)
+
+
+def replay(windows, params, **changes):
+    """Where the stopping rule of ``params`` (with ``changes`` applied, e.g.
+    ``stop_fraction=0.005``) stops on a recorded run.
+
+    Parameters
+    ----------
+    windows : sequence of dict
+        The run's record at the end of each stop window, in order: ``iteration`` and
+        ``moving_fraction`` (any other keys are passed through), plus possibly a last entry
+        at the run's final iteration.
+    params : lss_kernels.Params
+        The parameters of the recorded run (its ``stop_window`` must be the one recorded).
+
+    Returns
+    -------
+    (dict, bool)
+        The entry at which the rule stops, and whether it stopped there by the rule (False:
+        the record ended first, and the rule would have run at least that long).
+    """
+    params = dataclasses.replace(params, **changes)
+    rule = StopRule(params)
+    entry = None
+    for entry in windows:
+        it = int(entry["iteration"])
+        if rule.is_window_end(it):
+            rule.record(float(entry["moving_fraction"]))
+        if rule.converged(it) or it >= params.max_iterations:
+            return entry, True
+    if entry is None:
+        raise ValueError("replay: windows is empty")
+    return entry, False
