@@ -368,9 +368,14 @@ def _row(c, r, bw):
                setup=r["setup"], compile=r["compile"], iteration=r["iteration"],
                stage_sum=sum(r["stages"].values()),
                **{f"stage_{k}": r["stages"][k] for k in STAGES})
+    # the issue's budget, 4 B x pixels x disparities x (levels + 2), read two ways: with the
+    # c_max cyclopean candidates the volumes hold, and with the d_max disparities asked for
     model = 4 * row["pixels"] * r["c_max"] * (r["levels"] + 2)
+    model_dmax = 4 * row["pixels"] * r["d_max"] * (r["levels"] + 2)
     row.update(memory_bytes=r["memory_bytes"], memory_model_bytes=model,
-               memory_ratio=r["memory_bytes"] / model, maxrss_bytes=r["maxrss_bytes"],
+               memory_ratio=r["memory_bytes"] / model,
+               memory_ratio_dmax=r["memory_bytes"] / model_dmax,
+               maxrss_bytes=r["maxrss_bytes"],
                level_bytes=r["level_bytes"],
                stream_seconds=r["level_bytes"] / (bw * 1e9),
                bandwidth_fraction=r["level_bytes"] / (bw * 1e9) / r["iteration"])
@@ -477,19 +482,23 @@ def report(result):
                  f"{result.get('seconds', float('nan')):.0f} s.")
     lines += ["", "## Per configuration (ms per iteration; setup and compile in s)", "",
               "| sweep | W x H | d_max | threads | setup | compile | iteration | "
-              + " | ".join(STAGES) + " | fields MiB | model MiB | ratio | peak RSS MiB "
-              "| stream ms | bw fraction |",
-              "|" + "---|" * (14 + len(STAGES))]
+              + " | ".join(STAGES) + " | fields MiB | model MiB | ratio | ratio (d_max) | "
+              "peak RSS MiB | stream ms | bw fraction |",
+              "|" + "---|" * (15 + len(STAGES))]
     for r in result["rows"]:
         lines.append(
             f"| {r['sweep']} | {r['width']}x{r['height']} | {r['d_max']} | {r['threads']} | "
             f"{r['setup']:.2f} | {r['compile']:.2f} | {1e3 * r['iteration']:.2f} | "
             + " | ".join(f"{1e3 * r['stage_' + k]:.2f}" for k in STAGES)
             + f" | {r['memory_bytes'] / 2 ** 20:.1f} | {r['memory_model_bytes'] / 2 ** 20:.1f}"
-            f" | {r['memory_ratio']:.2f} | {r['maxrss_bytes'] / 2 ** 20:.0f} | "
+            f" | {r['memory_ratio']:.2f} | {r['memory_ratio_dmax']:.2f}"
+            f" | {r['maxrss_bytes'] / 2 ** 20:.0f} | "
             f"{1e3 * r['stream_seconds']:.2f} | {r['bandwidth_fraction']:.3f} |")
-    lines += ["", "model = 4 B x pixels x c_max x (levels + 2); stream = time to read the level "
-              "cost volumes once at the measured bandwidth; bw fraction = stream / iteration.",
+    lines += ["", "model = 4 B x pixels x c_max x (levels + 2) (ratio = fields / model); "
+              "ratio (d_max): the same with the d_max disparities asked for in place of the "
+              "c_max = ceil(d_max / 2) cyclopean candidates the volumes hold; stream = time to "
+              "read the level cost volumes once at the measured bandwidth; bw fraction = "
+              "stream / iteration.",
               "", "## Fitted exponents", "",
               "| stage | vs pixels x disparities (all) | vs pixels (size sweep) |",
               "|---|---|---|"]
@@ -518,7 +527,8 @@ def summary(result):
     """The ``--json`` object: per-stage seconds of both implementations and their speedup,
     plus exponents, bandwidth, memory and every configuration."""
     keys = ("sweep", "width", "height", "d_max", "threads", "setup", "compile", "iteration",
-            "memory_bytes", "memory_model_bytes", "maxrss_bytes", "bandwidth_fraction")
+            "memory_bytes", "memory_model_bytes", "memory_ratio", "memory_ratio_dmax",
+            "maxrss_bytes", "bandwidth_fraction")
     out = dict(arch=result["arch"], quick=result["quick"], bandwidth_gbs=result["bandwidth_gbs"],
                exponents=result["exponents"], exponents_pixels=result["exponents_pixels"],
                maxrss_bytes=result["maxrss_bytes"], seconds=result.get("seconds"),

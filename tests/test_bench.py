@@ -33,6 +33,9 @@ def test_tiny_run_returns_the_expected_keys(ti_arch, tmp_path):
     assert row["c_max"] == 8 and row["work"] == 56 * 40 * 8
     assert row["memory_bytes"] >= row["level_bytes"] > 0
     assert row["memory_model_bytes"] == 4 * 56 * 40 * 8 * (3 + 2)
+    assert row["memory_ratio"] == pytest.approx(row["memory_bytes"] / row["memory_model_bytes"])
+    # d_max 16 disparities asked for, c_max 8 candidates held: half the ratio
+    assert row["memory_ratio_dmax"] == pytest.approx(row["memory_ratio"] * 8 / 16)
     for name in ("scaling.csv", "speedup.csv", "results.json", "results.md"):
         assert (tmp_path / name).stat().st_size > 0
     assert "Taichi vs numpy" in (tmp_path / "results.md").read_text()
