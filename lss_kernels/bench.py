@@ -181,8 +181,9 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
     Builds a solver on :func:`synthetic_pair` (``setup``: the constructor, including the
     compilation of the set-up kernels), runs ``WARMUP`` iterations (``compile``: their time
     minus ``WARMUP`` mean iterations: compilation or offline-cache loading of the iteration's
-    kernels, and the first searches of the message candidates), then times ``iterations`` iterations (``iteration``: mean wall seconds;
-    ``stages``: mean seconds per stage from ``Solver(profile=True)``).  With
+    kernels, and the first searches of the message candidates), then times ``iterations``
+    iterations (``iteration``: mean wall seconds; ``stages``: mean seconds per stage from
+    ``Solver(profile=True)``).  With
     ``numpy_iterations > 0`` the numpy specification then runs the same iteration indices from
     the state after the warm-up (``numpy``: mean seconds per stage).
     """
@@ -484,7 +485,7 @@ def report(result):
               "| sweep | W x H | d_max | threads | setup | compile | iteration | "
               + " | ".join(STAGES) + " | fields MiB | model MiB | ratio | ratio (d_max) | "
               "peak RSS MiB | stream ms | bw fraction |",
-              "|" + "---|" * (15 + len(STAGES))]
+              "|" + "---|" * (14 + len(STAGES))]
     for r in result["rows"]:
         lines.append(
             f"| {r['sweep']} | {r['width']}x{r['height']} | {r['d_max']} | {r['threads']} | "

@@ -261,9 +261,15 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
         if any((scene_dir.name, m) in fresh for m in methods) or not panel.exists():
             _write_panel(panel, scene_dir, [records[scene_dir.name, m] for m in methods], out)
     traced = [r for r in rows if r["method"] == "lss" and r.get("trace")]
-    if trace and traced:
-        from .params import Params
-        _write_convergence(out, traced, params if params is not None else Params())
+    if trace and "lss" in methods:
+        missing = [r["scene"] for r in rows if r["method"] == "lss" and not r.get("trace")]
+        if missing and progress:
+            print(f"lss eval: {len(missing)} lss run(s) finished earlier without --trace are "
+                  f"left out of convergence.md (use --force to trace them)", file=sys.stderr)
+        if traced:
+            from .params import Params
+            _write_convergence(out, traced, params if params is not None else Params(),
+                               missing)
     return rows
 
 
@@ -396,8 +402,9 @@ def _write_table(path: Path, rows, names, methods, dataset_dir: Path) -> None:
 RULE_VARIANTS = ((1.0, 1.0), (1.0, 0.5), (1.5, 1.0), (1.5, 0.5), (2.5, 1.0), (5.0, 1.0))
 
 
-def _write_convergence(out: Path, records, params) -> None:
-    """convergence.csv / .md / .png from the traces of ``lss`` runs (see ``run_eval``)."""
+def _write_convergence(out: Path, records, params, missing=()) -> None:
+    """convergence.csv / .md / .png from the traces of ``lss`` runs (see ``run_eval``);
+    ``missing``: the scenes whose lss run has no trace."""
     from . import viz
     from .stopping import replay
     keys = ("iteration", "moving_fraction", "fg_fraction", "occ_f1", "bad4")
@@ -409,17 +416,22 @@ def _write_convergence(out: Path, records, params) -> None:
                 writer.writerow([r["scene"]] + [f"{row[k]:.6g}" for k in keys])
 
     last = max(r["trace"][-1]["iteration"] for r in records)
-    marks = list(range(100, last + 1, 100))
+    # columns every ~100 iterations, on the recorded window ends
+    step = params.stop_window * max(1, round(100 / params.stop_window))
+    marks = list(range(step, last + 1, step))
     text = ["# Accuracy against iterations (lss)", "",
-            "Occlusion F1 at every 100 iterations (blank: the run had stopped) and at the "
+            f"Occlusion F1 every {step} iterations (blank: the run had stopped) and at the "
             "run's own stop.", "",
-            "| scene | " + " | ".join(str(m) for m in marks) + " | stop | F1 |",
+            "| scene | " + "".join(f"{m} | " for m in marks) + "stop | F1 |",
             "|---|" + "---|" * (len(marks) + 2)]
     for r in records:
         at = {row["iteration"]: row["occ_f1"] for row in r["trace"]}
-        cells = [f"{at[m]:.2f}" if m in at else "" for m in marks]
-        text.append(f"| {r['scene']} | " + " | ".join(cells)
-                    + f" | {r['trace'][-1]['iteration']} | {r['trace'][-1]['occ_f1']:.2f} |")
+        cells = "".join((f"{at[m]:.2f}" if m in at else "") + " | " for m in marks)
+        text.append(f"| {r['scene']} | {cells}"
+                    f"{r['trace'][-1]['iteration']} | {r['trace'][-1]['occ_f1']:.2f} |")
+    if missing:
+        text += ["", f"Not traced (finished by an earlier call without --trace; rerun them "
+                     f"with --force): {', '.join(missing)}."]
     text += ["", "## Variants of the stopping rule, replayed on these runs", "",
              f"The runs used stop_fraction {params.stop_fraction}, min_iterations "
              f"{params.min_iterations}, stop_window {params.stop_window}, stop_patience "
@@ -430,6 +442,8 @@ def _write_convergence(out: Path, records, params) -> None:
     for f_scale, m_scale in RULE_VARIANTS:
         change = dict(stop_fraction=params.stop_fraction * f_scale,
                       min_iterations=max(1, int(params.min_iterations * m_scale)))
+        if not change["stop_fraction"] < 1:
+            continue                                    # not a valid Params.stop_fraction
         stops = [replay(r["trace"], params, **change) for r in records]
         its = [e["iteration"] for e, _ in stops]
         text.append(f"| {change['stop_fraction']:.4g} | {change['min_iterations']} | "

@@ -160,7 +160,7 @@ class LevelSet:
         f = lambda: pool.field(ti.f32, (H, W))
         self.phi = f()
         self.phi_next = f()
-        self.phi_x, self.phi_y = f(), f()
+        self.phi_x = f()     # the sign of dphi/dx orients the occlusion ray cast
         self.kappa, self.normal_x, self.normal_y = f(), f(), f()
         self.b_map = f()
         # row-filtered scratch of the separable filters (phi: three orders; B: two)
@@ -266,8 +266,8 @@ class LevelSet:
     @ti.kernel
     def _columns_curvature(self):
         """Along y: the five derivatives of phi from the row-filtered scratch, and from them
-        phi_x, phi_y, the clipped curvature kappa = div(grad phi / |grad phi|) and the normal
-        N = grad phi / |grad phi| (the second derivatives are used here only)."""
+        phi_x, the clipped curvature kappa = div(grad phi / |grad phi|) and the normal
+        N = grad phi / |grad phi| (phi_y and the second derivatives are used here only)."""
         clip = self.curvature_clip
         for y, x in self.phi:
             v0 = self._filters(self._t0, y, x, 0, (1, 2))
@@ -277,7 +277,6 @@ class LevelSet:
             norm = ti.sqrt(px * px + py * py) + 1e-10
             k = (pxx * py * py - 2.0 * px * py * pxy + pyy * px * px) / (norm * norm * norm)
             self.phi_x[y, x] = px
-            self.phi_y[y, x] = py
             self.kappa[y, x] = ti.min(ti.max(k, -clip), clip)
             self.normal_x[y, x] = px / norm
             self.normal_y[y, x] = py / norm
@@ -290,7 +289,7 @@ class LevelSet:
             self._t1[y, x] = v[1]
 
     def derivatives(self):
-        """phi_x, phi_y, kappa and N from the current phi."""
+        """phi_x, kappa and N from the current phi."""
         self._rows3(self.phi)
         self._columns_curvature()
 

@@ -38,7 +38,12 @@ def test_tiny_run_returns_the_expected_keys(ti_arch, tmp_path):
     assert row["memory_ratio_dmax"] == pytest.approx(row["memory_ratio"] * 8 / 16)
     for name in ("scaling.csv", "speedup.csv", "results.json", "results.md"):
         assert (tmp_path / name).stat().st_size > 0
-    assert "Taichi vs numpy" in (tmp_path / "results.md").read_text()
+    md = (tmp_path / "results.md").read_text()
+    assert "Taichi vs numpy" in md
+    lines = md.splitlines()
+    for i, line in enumerate(lines):           # every table: separator as wide as header
+        if line.startswith("|---"):
+            assert line.count("|") == lines[i - 1].count("|"), lines[i - 1]
 
 
 def test_device_bandwidth_copies_through_a_kernel(ti_arch):

@@ -177,13 +177,16 @@ def test_trace_scores_every_stop_window_and_replays_the_rule(dataset, tmp_path):
         assert its[-1] == row["iterations"]
         assert all(i % params.stop_window == 0 for i in its[:-1])
         assert trace[-1]["occ_f1"] == pytest.approx(row["occ_f1"])   # the run's own output
-        entry, _ = replay(trace, params)
-        assert entry["iteration"] == row["iterations"]
+        entry, fired = replay(trace, params)        # by the rule or at the cap
+        assert fired and entry["iteration"] == row["iterations"]
         n += len(trace)
     with open(tmp_path / "convergence.csv") as f:
         assert len(list(csv.reader(f))) == n + 1
     md = (tmp_path / "convergence.md").read_text()
     assert "| stop_fraction | min_iterations |" in md and "| 0.01 | 10 |" in md
+    tables = [line for line in md.splitlines() if line.startswith("|")]
+    header, separator = tables[0], tables[1]
+    assert header.count("|") == separator.count("|")       # a table Markdown renders
     assert iio.imread(tmp_path / "convergence.png").ndim == 3
 
 
