@@ -215,6 +215,23 @@ def test_cli(dataset, tmp_path, capsys):
     assert (tmp_path / "results.csv").exists()
 
 
+def test_cli_trace_flag_reaches_run_eval(dataset, tmp_path, monkeypatch):
+    from lss_kernels import evaluate
+    seen = {}
+
+    def fake_run_eval(dataset_dir, **kwargs):
+        seen.update(kwargs)
+        (tmp_path / "table.md").write_text("table\n")
+        return []
+
+    monkeypatch.setattr(evaluate, "run_eval", fake_run_eval)
+    assert _cli(["eval", str(dataset), "--methods", "lss", "--out", str(tmp_path),
+                 "--trace"]) == 0
+    assert seen["trace"] is True
+    assert _cli(["eval", str(dataset), "--methods", "lss", "--out", str(tmp_path)]) == 0
+    assert seen["trace"] is False
+
+
 def test_cli_one_line_errors(dataset, tmp_path, capsys, monkeypatch):
     assert _cli(["eval", str(dataset), "--methods", "sgm,hsm", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
