@@ -84,12 +84,13 @@ def _solve(scene: io.Scene, params, trace: bool = False):
     else:
         solver.reset(scene.left, scene.right, scene.d_max, init, init_frame=frame)
     rows, spent = [], [0.0]
+    masks = metrics.evaluation_masks(scene) if trace else None
 
     def record(s, stats):
         if s.iteration % s.params.stop_window == 0 or s.done:
             start = time.perf_counter()
             disparity, occlusion, _ = s.left_view()
-            score = metrics.score(disparity, occlusion, scene)
+            score = metrics.score(disparity, occlusion, scene, masks)
             rows.append({"iteration": s.iteration, "moving_fraction": stats["moving_fraction"],
                          "fg_fraction": stats["fg_fraction"],
                          "occ_f1": float(score["occ_f1"]), "bad4": float(score["bad4"])})

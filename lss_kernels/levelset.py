@@ -380,6 +380,13 @@ class LevelSet:
         return v
 
     @ti.func
+    def _start_count(self, count: ti.template()):
+        """Zero ``flipped`` and ``area`` before a counting pass (kernel scope, serial)."""
+        if ti.static(count):
+            self.flipped[None] = 0
+            self.area[None] = 0
+
+    @ti.func
     def _store(self, dst: ti.template(), y, x, value, count: ti.template()):
         """dst[y, x] = value; with ``count``, first tally the sign flip against dst's previous
         value and the new foreground."""
@@ -400,9 +407,7 @@ class LevelSet:
         the pixels > 0."""
         shared_slots, shared_ops, survivors = ti.static(shared)
         final_slots, final_ops, index = ti.static(final)
-        if ti.static(count):
-            self.flipped[None] = 0
-            self.area[None] = 0
+        self._start_count(count)
         for y, pair in ti.ndrange(self.H, (self.W + 1) // 2):
             x = 2 * pair
             columns = [self._columns[y, self._reflect(x + c - k // 2 + 1, self.W)]
@@ -419,9 +424,11 @@ class LevelSet:
                     self._store(dst, y, x + 1, median, count)
 
     @ti.kernel
-    def _copy(self, src: ti.template(), dst: ti.template()):
+    def _copy(self, src: ti.template(), dst: ti.template(), count: ti.template()):
+        """dst = src; with ``count``, tallied as in :meth:`_store`."""
+        self._start_count(count)
         for y, x in dst:
-            dst[y, x] = src[y, x]
+            self._store(dst, y, x, src[y, x], count)
 
     @ti.kernel
     def _features(self, src: ti.template(), foreground: ti.i32):
@@ -455,19 +462,11 @@ class LevelSet:
         pixels > 0 (``area``)."""
         k = self.median_size
         if k == 1:
-            self._copy_counting(src, dst, count)
+            self._copy(src, dst, count)
             return
         column_ops, shared, final = self._network
         self._sort_columns(src, k, column_ops)
         self._median_of_columns(dst, k, shared, final, count)
-
-    @ti.kernel
-    def _copy_counting(self, src: ti.template(), dst: ti.template(), count: ti.template()):
-        if ti.static(count):
-            self.flipped[None] = 0
-            self.area[None] = 0
-        for y, x in dst:
-            self._store(dst, y, x, src[y, x], count)
 
     @ti.kernel
     def net_change(self):
@@ -498,4 +497,4 @@ class LevelSet:
         """phi = phi_scale x signed distance of a boolean ``(H, W)`` mask."""
         self._from_mask(np.ascontiguousarray(mask, dtype=np.int32))
         self.reinitialise(self.phi_next)
-        self._copy(self.phi_next, self.phi)
+        self._copy(self.phi_next, self.phi, False)

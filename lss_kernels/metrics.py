@@ -199,7 +199,7 @@ def score_arrays(disparity, occlusion, disp_true, occ_true, roi_fg, roi_bg,
     return _scores(disparity, occlusion, disp_true, masks)
 
 
-def score(disparity, occlusion, scene) -> dict:
+def score(disparity, occlusion, scene, masks=None) -> dict:
     """Score a left-view prediction on a scene: :func:`score_arrays` with the scene's truth.
 
     Parameters
@@ -210,10 +210,15 @@ def score(disparity, occlusion, scene) -> dict:
         Predicted left-view occlusion mask.
     scene : lss_kernels.io.Scene
         See :func:`evaluation_masks` for the fields it needs.
+    masks : dict, optional
+        ``evaluation_masks(scene)``, computed once by a caller that scores many predictions
+        of the same scene.
 
     Returns
     -------
     dict
         As :func:`score_arrays`.
     """
-    return _scores(disparity, occlusion, scene.disp_left, evaluation_masks(scene))
+    if masks is None:
+        masks = evaluation_masks(scene)
+    return _scores(disparity, occlusion, scene.disp_left, masks)

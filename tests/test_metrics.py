@@ -139,6 +139,9 @@ def test_score_scene_fallbacks():
     assert masks["true_occ"].sum() == 2 * 15
     perfect = score(disp, occ, scene)
     assert (perfect["occ_f1"], perfect["bad4"]) == (1.0, 0.0)
+    # precomputed masks (a caller scoring many predictions of one scene) give the same score
+    shifted = np.roll(occ, 3, axis=1)
+    assert score(disp + 5, shifted, scene, masks) == score(disp + 5, shifted, scene)
     scene.boundary = boundary_from_foreground(fg)
     assert evaluation_masks(scene)["band"].sum() == 2 * (50 - 6)
     scene.disp_left = None
