@@ -357,8 +357,13 @@ class LevelSet:
         return v
 
     @ti.kernel
-    def _sort_columns(self, src: ti.template(), k: ti.template(), column_ops: ti.template()):
-        """Stage 1 of the median: each pixel's window column, sorted (symmetric borders)."""
+    def _sort_columns(self, src: ti.template()):
+        """Stage 1 of the median: each pixel's window column, sorted (symmetric borders).
+        The networks are attributes read with ``ti.static``, not kernel arguments: Taichi
+        hashes every template argument at each launch, which for these tuples of a few
+        hundred comparators cost more than the kernel itself."""
+        k = ti.static(self.median_size)
+        column_ops = ti.static(self._network[0])
         for y, x in src:
             v = ti.Vector.zero(ti.f32, k)
             for r in ti.static(range(k)):
@@ -399,14 +404,14 @@ class LevelSet:
         dst[y, x] = value
 
     @ti.kernel
-    def _median_of_columns(self, dst: ti.template(), k: ti.template(), shared: ti.template(),
-                           final: ti.template(), count: ti.template()):
+    def _median_of_columns(self, dst: ti.template(), count: ti.template()):
         """Stages 2 and 3: the medians at (y, x) and (y, x + 1), x even, from the sorted
         columns (the k - 1 columns both windows hold are merged once).  With ``count``,
         ``flipped`` and ``area`` count the sign changes against dst's previous content and
         the pixels > 0."""
-        shared_slots, shared_ops, survivors = ti.static(shared)
-        final_slots, final_ops, index = ti.static(final)
+        k = ti.static(self.median_size)
+        shared_slots, shared_ops, survivors = ti.static(self._network[1])
+        final_slots, final_ops, index = ti.static(self._network[2])
         self._start_count(count)
         for y, pair in ti.ndrange(self.H, (self.W + 1) // 2):
             x = 2 * pair
@@ -464,9 +469,8 @@ class LevelSet:
         if k == 1:
             self._copy(src, dst, count)
             return
-        column_ops, shared, final = self._network
-        self._sort_columns(src, k, column_ops)
-        self._median_of_columns(dst, k, shared, final, count)
+        self._sort_columns(src)
+        self._median_of_columns(dst, count)
 
     @ti.kernel
     def net_change(self):
