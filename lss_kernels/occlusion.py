@@ -6,8 +6,9 @@ disparity with slope s = sign(d phi / dx), i.e. through the points (x - s t, The
 meets the background surface where ``t = Theta_1(x, y) - Theta_2(x - s t, y)`` and
 ``delta_theta = x - x' = s t``: the occluded extent equals the disparity jump (cyclopean
 units), to the left of a left boundary (s = +1) and to the right of a right boundary.  The
-root is found by fixed-point iteration started at the jump at x, which converges whenever
-|dTheta_2/dx| < 1 (any physical surface); with a fronto-parallel background it is exact after
+root is found by fixed-point iteration started at the jump at x (``FIXED_POINT_STEPS`` steps,
+left early when a step returns its input, which the remaining steps would repeat), which
+converges whenever |dTheta_2/dx| < 1 (any physical surface); with a fronto-parallel background it is exact after
 one step, and the authors' release uses that first step, ``Theta_1 - Theta_2``.  No jump
 (Theta_1 <= Theta_2) or no slope: delta_theta = 0.
 
@@ -69,8 +70,11 @@ class OcclusionGeometry:
                 t = jump
                 if ray_cast:
                     for _ in range(FIXED_POINT_STEPS):
-                        t = ti.min(ti.max(th1 - shapes.value(1, xf - s * t, yf), 0.0),
-                                   2.0 * self.C)
+                        t_next = ti.min(ti.max(th1 - shapes.value(1, xf - s * t, yf), 0.0),
+                                        2.0 * self.C)
+                        if t_next == t:
+                            break  # a fixed point: the remaining steps would repeat it
+                        t = t_next
                 dt = s * t
             self.delta_theta[y, x] = dt
             self.phi_plus[y, x] = self.sample_row(phi, y, xf + dt)

@@ -77,6 +77,22 @@ def test_ray_cast_on_a_slanted_background_matches_the_analytic_intersection(geom
     assert np.abs(got - s * (th1(X, 0) - th2(X, 0))).max() > 0.1
 
 
+def test_ray_cast_runs_the_fixed_point_iteration_to_its_last_step(geometry):
+    """A steep background (dTheta_2/dx = 1/2) leaves the fixed-point iteration short of the
+    intersection after its 6 steps; the kernel, which leaves the loop once a step repeats
+    its input, must still give what all 6 steps give."""
+    occ, _, setup = geometry
+    th1 = lambda x, y: 14 + 0 * x
+    th2 = lambda x, y: 4 + 0.5 * (x - 32)
+    p = setup(th1, th2, _fg_band(22, 44))
+    px = np.broadcast_to(np.gradient(p), (H, W))
+    got = occ.delta_theta.to_numpy()
+    six = ref.delta_theta(th1, th2, px, steps=6, c_cap=2.0 * C)
+    exact = ref.delta_theta(th1, th2, px, steps=200, c_cap=2.0 * C)
+    assert np.abs(six - exact).max() > 0.05          # the 6-step result is not converged
+    np.testing.assert_allclose(got, six, atol=2e-4)
+
+
 def test_no_jump_no_occlusion(geometry):
     occ, _, setup = geometry
     setup(lambda x, y: 4 + 0 * x, lambda x, y: 9 + 0 * x, _fg_band(20, 40))
