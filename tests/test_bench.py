@@ -30,6 +30,11 @@ def test_tiny_run_returns_the_expected_keys(ti_arch, tmp_path):
     assert result["bandwidth_source"] == ("Taichi copy kernel on " + ti_arch if on_gpu
                                           else "numpy copy")
     row = result["rows"][0]
+    # timed in interleaved blocks (QUICK: 2); the fastest block of each implementation counts
+    assert s["repeats"] == 2 and len(s["block_taichi"]) == 2 and len(s["block_numpy"]) == 2
+    assert row["iteration"] == min(row["block_iterations"]) == min(s["block_taichi"])
+    assert s["numpy_iteration"] == pytest.approx(min(s["block_numpy"]))
+    assert "block_iterations" not in (tmp_path / "scaling.csv").read_text().splitlines()[0]
     assert row["c_max"] == 8 and row["work"] == 56 * 40 * 8
     assert row["memory_bytes"] >= row["level_bytes"] > 0
     assert row["memory_model_bytes"] == 4 * 56 * 40 * 8 * (3 + 2)
