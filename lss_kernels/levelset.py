@@ -24,9 +24,6 @@ from .distance import INF, DistanceTransform
 
 __all__ = ["LevelSet", "median_network"]
 
-#: Pixels per block of the row-filtered scratch of phi's derivatives (one AVX2 register).
-LANES = 8
-
 
 def _batcher(size, block=1):
     """Comparator pairs of Batcher's odd-even merge sort of ``size`` (a power of two) values,
@@ -166,11 +163,8 @@ class LevelSet:
         self.phi_x = f()     # the sign of dphi/dx orients the occlusion ray cast
         self.kappa, self.normal_x, self.normal_y = f(), f(), f()
         self.b_map = f()
-        # row-filtered scratch of the separable filters (phi: three orders; then B: two),
-        # stored in blocks of LANES horizontally adjacent pixels (a vector per block), so
-        # that the column passes read whole blocks and LLVM vectorises them across lanes
-        self.blocks = (W + LANES - 1) // LANES
-        self._lanes = [pool.vector(LANES, ti.f32, (H, self.blocks)) for _ in range(3)]
+        # row-filtered scratch of the separable filters (phi: three orders; B: two)
+        self._t0, self._t1, self._t2 = f(), f(), f()
         self.flipped = pool.field(ti.i32, ())
         self.changed = pool.field(ti.i32, ())
         self.reference_sign = pool.field(ti.i8, (H, W))
@@ -262,98 +256,37 @@ class LevelSet:
 
     @ti.kernel
     def _rows3(self, src: ti.template()):
-        """Along x: orders 0, 1, 2 of src into the three block scratch fields (lanes past
-        the image's right edge hold 0)."""
-        for y, xb in self._lanes[0]:
-            v0 = ti.Vector.zero(ti.f32, LANES)
-            v1 = ti.Vector.zero(ti.f32, LANES)
-            v2 = ti.Vector.zero(ti.f32, LANES)
-            for lane in ti.static(range(LANES)):
-                x = xb * LANES + lane
-                if x < self.W:
-                    v = self._filters(src, y, x, 1, (0, 1, 2))
-                    v0[lane], v1[lane], v2[lane] = v[0], v[1], v[2]
-            self._lanes[0][y, xb] = v0
-            self._lanes[1][y, xb] = v1
-            self._lanes[2][y, xb] = v2
-
-    @ti.func
-    def _column_filters(self, src: ti.template(), y, xb, orders: ti.template()):
-        """:meth:`_filters` along y for a whole block of ``src`` (a block scratch field): a
-        matrix with one row of LANES pixels per order."""
-        out = ti.Matrix.zero(ti.f32, ti.static(len(orders)), LANES)
-        centre = src[y, xb]
-        for j in ti.static(range(len(orders))):
-            for lane in ti.static(range(LANES)):
-                out[j, lane] = ti.static(float(self.tap_values[orders[j]][self.half])) * \
-                    centre[lane]
-        if self.half <= y < self.H - self.half:
-            for i in ti.static(range(1, self.half + 1)):
-                out = self._block_pair(out, src[y - i, xb], src[y + i, xb], i, orders)
-        else:
-            for i in ti.static(range(1, self.half + 1)):
-                out = self._block_pair(out, src[self._reflect(y - i, self.H), xb],
-                                       src[self._reflect(y + i, self.H), xb], i, orders)
-        return out
-
-    @ti.func
-    def _block_pair(self, out, before, after, i: ti.template(), orders: ti.template()):
-        """:meth:`_pair` for blocks: taps +-i of every order added to the rows of ``out``."""
-        even = before + after
-        odd = before - after
-        for j in ti.static(range(len(orders))):
-            w = ti.static(float(self.tap_values[orders[j]][self.half + i]))
-            for lane in ti.static(range(LANES)):
-                if ti.static(orders[j] == 1):
-                    out[j, lane] += w * odd[lane]
-                else:
-                    out[j, lane] += w * even[lane]
-        return out
-
-    @ti.func
-    def _row(self, m, j: ti.template()):
-        return ti.Vector([m[j, lane] for lane in ti.static(range(LANES))])
+        """Along x: orders 0, 1, 2 of src into the three scratch fields."""
+        for y, x in src:
+            v = self._filters(src, y, x, 1, (0, 1, 2))
+            self._t0[y, x] = v[0]
+            self._t1[y, x] = v[1]
+            self._t2[y, x] = v[2]
 
     @ti.kernel
     def _columns_curvature(self):
-        """Along y, a block of LANES pixels at a time: the five derivatives of phi from the
-        row-filtered scratch, and from them phi_x, the clipped curvature
-        kappa = div(grad phi / |grad phi|) and the normal N = grad phi / |grad phi|
-        (phi_y and the second derivatives are used here only)."""
+        """Along y: the five derivatives of phi from the row-filtered scratch, and from them
+        phi_x, the clipped curvature kappa = div(grad phi / |grad phi|) and the normal
+        N = grad phi / |grad phi| (phi_y and the second derivatives are used here only)."""
         clip = self.curvature_clip
-        for y, xb in self._lanes[0]:
-            m0 = self._column_filters(self._lanes[0], y, xb, (1, 2))
-            m1 = self._column_filters(self._lanes[1], y, xb, (0, 1))
-            m2 = self._column_filters(self._lanes[2], y, xb, (0,))
-            py, pyy = self._row(m0, 0), self._row(m0, 1)
-            px, pxy = self._row(m1, 0), self._row(m1, 1)
-            pxx = self._row(m2, 0)
+        for y, x in self.phi:
+            v0 = self._filters(self._t0, y, x, 0, (1, 2))
+            v1 = self._filters(self._t1, y, x, 0, (0, 1))
+            pxx = self._filters(self._t2, y, x, 0, (0,))[0]
+            px, py, pyy, pxy = v1[0], v0[0], v0[1], v1[1]
             norm = ti.sqrt(px * px + py * py) + 1e-10
             k = (pxx * py * py - 2.0 * px * py * pxy + pyy * px * px) / (norm * norm * norm)
-            k = ti.min(ti.max(k, -clip), clip)
-            nx = px / norm
-            ny = py / norm
-            for lane in ti.static(range(LANES)):
-                x = xb * LANES + lane
-                if x < self.W:
-                    self.phi_x[y, x] = px[lane]
-                    self.kappa[y, x] = k[lane]
-                    self.normal_x[y, x] = nx[lane]
-                    self.normal_y[y, x] = ny[lane]
+            self.phi_x[y, x] = px
+            self.kappa[y, x] = ti.min(ti.max(k, -clip), clip)
+            self.normal_x[y, x] = px / norm
+            self.normal_y[y, x] = py / norm
 
     @ti.kernel
     def _rows2(self, src: ti.template()):
-        """Along x: orders 0 and 1 of src into the first two block scratch fields."""
-        for y, xb in self._lanes[0]:
-            v0 = ti.Vector.zero(ti.f32, LANES)
-            v1 = ti.Vector.zero(ti.f32, LANES)
-            for lane in ti.static(range(LANES)):
-                x = xb * LANES + lane
-                if x < self.W:
-                    v = self._filters(src, y, x, 1, (0, 1))
-                    v0[lane], v1[lane] = v[0], v[1]
-            self._lanes[0][y, xb] = v0
-            self._lanes[1][y, xb] = v1
+        for y, x in src:
+            v = self._filters(src, y, x, 1, (0, 1))
+            self._t0[y, x] = v[0]
+            self._t1[y, x] = v[1]
 
     def derivatives(self):
         """phi_x, kappa and N from the current phi."""
@@ -393,25 +326,20 @@ class LevelSet:
     def _step(self, cost: ti.template(), C: ti.template(), shapes: ti.template(),
               occ: ti.template(), dt: ti.f32, mu: ti.f32):
         clip = self.boundary_clip
-        for y, xb in self._lanes[0]:
-            # grad B for the block: the column pass of the separable filters (rows in
-            # ``_rows2``)
-            b_x = self._row(self._column_filters(self._lanes[1], y, xb, (0,)), 0)
-            b_y = self._row(self._column_filters(self._lanes[0], y, xb, (1,)), 0)
-            for lane in ti.static(range(LANES)):
-                x = xb * LANES + lane
-                if x < self.W:
-                    xf = ti.cast(x, ti.f32)
-                    yf = ti.cast(y, ti.f32)
-                    p = self.phi[y, x]
-                    m1 = self._cost_at(cost, y, xf, shapes.value(0, xf, yf), C)
-                    m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x],
-                                       shapes.value(1, xf, yf), C)
-                    bt = self.b_map[y, x] * self.kappa[y, x] + \
-                        self.normal_x[y, x] * b_x[lane] + self.normal_y[y, x] * b_y[lane]
-                    bt = ti.min(ti.max(bt, -clip), clip)
-                    dirac = (1.0 / math.pi) / (1.0 + p * p)
-                    self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt)
+        for y, x in self.phi:
+            xf = ti.cast(x, ti.f32)
+            yf = ti.cast(y, ti.f32)
+            p = self.phi[y, x]
+            m1 = self._cost_at(cost, y, xf, shapes.value(0, xf, yf), C)
+            m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x], shapes.value(1, xf, yf), C)
+            # grad B: the column pass of the separable filters (rows in ``_rows2``)
+            b_x = self._filters(self._t1, y, x, 0, (0,))[0]
+            b_y = self._filters(self._t0, y, x, 0, (1,))[0]
+            bt = self.b_map[y, x] * self.kappa[y, x] + \
+                self.normal_x[y, x] * b_x + self.normal_y[y, x] * b_y
+            bt = ti.min(ti.max(bt, -clip), clip)
+            dirac = (1.0 / math.pi) / (1.0 + p * p)
+            self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt)
 
     # ---------------------------------------------------------------- median, re-init
     @ti.func
