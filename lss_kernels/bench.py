@@ -257,7 +257,7 @@ def _worker(argv=None):
     backend.init(arch=cfg["arch"], threads=cfg.get("threads"),
                  offline_cache=cfg.get("offline_cache", True))
     r = measure(cfg["width"], cfg["height"], cfg["d_max"], cfg.get("iterations", 3),
-                cfg.get("numpy_iterations", 0), repeats=cfg.get("repeats", 1))
+                cfg.get("numpy_iterations", 0), repeats=cfg["repeats"])
     print("BENCH_RESULT " + json.dumps(r), flush=True)
 
 
@@ -291,7 +291,7 @@ def plan(quick=False, threads=(None,), overrides=None):
                     cfg["numpy_iterations"] if numpy else 0)
                 return
         configs.append(dict(sweep=sweep, width=w, height=h, d_max=d, threads=t,
-                            iterations=cfg["iterations"], repeats=cfg.get("repeats", 1),
+                            iterations=cfg["iterations"], repeats=cfg["repeats"],
                             numpy_iterations=cfg["numpy_iterations"] if numpy else 0))
 
     t0 = threads[0]

@@ -36,6 +36,7 @@ import numpy as np
 from . import io, metrics
 from .baselines import METHODS as BASELINES, require_opencv
 from .params import c_max
+from .stopping import StopRule, replay
 
 __all__ = ["COLUMNS", "METHOD_NAMES", "add_cli", "main_eval", "run_eval"]
 
@@ -85,9 +86,10 @@ def _solve(scene: io.Scene, params, trace: bool = False):
         solver.reset(scene.left, scene.right, scene.d_max, init, init_frame=frame)
     rows, spent = [], [0.0]
     masks = metrics.evaluation_masks(scene) if trace else None
+    window_end = StopRule(solver.params).is_window_end
 
     def record(s, stats):
-        if s.iteration % s.params.stop_window == 0 or s.done:
+        if window_end(s.iteration) or s.done:
             start = time.perf_counter()
             disparity, occlusion, _ = s.left_view()
             score = metrics.score(disparity, occlusion, scene, masks)
@@ -407,7 +409,6 @@ def _write_convergence(out: Path, records, params, missing=()) -> None:
     """convergence.csv / .md / .png from the traces of ``lss`` runs (see ``run_eval``);
     ``missing``: the scenes whose lss run has no trace."""
     from . import viz
-    from .stopping import replay
     keys = ("iteration", "moving_fraction", "fg_fraction", "occ_f1", "bad4")
     with open(out / "convergence.csv", "w", newline="") as f:
         writer = csv.writer(f)

@@ -465,8 +465,7 @@ class LevelSet:
         """dst = the ``median_size``-square median of src (symmetric borders); with
         ``count``, also the sign flips against dst's previous content (``flipped``) and the
         pixels > 0 (``area``)."""
-        k = self.median_size
-        if k == 1:
+        if self.median_size == 1:
             self._copy(src, dst, count)
             return
         self._sort_columns(src)

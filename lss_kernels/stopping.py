@@ -11,8 +11,6 @@ the foreground area; it stops after ``stop_patience`` quiet windows in a row, no
 run (``lss eval --trace``): how many iterations another rule would have taken, and at what
 accuracy.  Taichi-free.
 """
-import dataclasses
-
 __all__ = ["StopRule", "replay"]
 
 
@@ -67,7 +65,7 @@ def replay(windows, params, **changes):
         The entry at which the rule stops, and whether it stopped there by the rule (False:
         the record ended first, and the rule would have run at least that long).
     """
-    params = dataclasses.replace(params, **changes)
+    params = params.replace(**changes)
     rule = StopRule(params)
     entry = None
     for entry in windows:
