@@ -352,33 +352,61 @@ def _run_ops(v, ops):
     return v
 
 
+def _tree_medians(node, held, sorted_column, load, medians):
+    """Run a node of :func:`median_network`'s tree in Python: its new columns merged with
+    the parent's survivors ``held``; a leaf writes its window's median."""
+    columns_at, pre, slots, ops, keep, children, output = node
+    columns = [sorted_column(c) for c in columns_at]
+    if held is None:
+        runs = columns
+    elif not pre:
+        runs = [held, columns[0]]
+    else:
+        merged = _run_ops(load(pre[0], columns), pre[1])
+        runs = [held, [merged[i] for i in pre[2]]]
+    v = _run_ops(load(slots, runs), ops)
+    if output >= 0:
+        assert len(keep) == 1
+        medians[output] = v[keep[0]]
+    for child in children:
+        _tree_medians(child, [v[i] for i in keep], sorted_column, load, medians)
+
+
 @pytest.mark.parametrize("k", [3, 5, 7])
-def test_median_network_selects_the_medians_of_two_adjacent_windows(k):
+def test_median_network_selects_the_medians_of_a_tile_of_windows(k):
     from lss_kernels.levelset import _merge_network, median_network
-    column_ops, (s_slots, s_ops, survivors), (f_slots, f_ops, index) = median_network(k)
-    # per output pixel: half the shared merge, one final merge, the column sort -- against
-    # merging all k sorted columns of one window to its median
-    per_pixel = len(s_ops) / 2 + len(f_ops) + len(column_ops)
+    column_ops, tile, root = median_network(k)
+    half = k // 2
+
+    def comparators(node):
+        own = len(node[3]) + (len(node[1][1]) if node[1] else 0)
+        return own + sum(comparators(child) for child in node[5])
+
+    # per window, after the column sort: the tree against merging all k sorted columns of
+    # one window (k = 7: 79 against 231 ops) and against Adams' two-window tile (127)
     _, one_window, _ = _merge_network([k] * k, [(k * k - 1) // 2])
-    assert per_pixel < 0.62 * (len(one_window) + len(column_ops))
-    assert len(survivors) == k + 1
+    per_window = comparators(root) / tile
+    assert per_window < 0.55 * len(one_window)
+    if k == 7:
+        assert tile == 4 and per_window < 80
     load = lambda slots, runs: [-np.inf if s == "lo" else np.inf if s == "hi"
                                 else runs[s[0]][s[1]] for s in slots]
     rng = np.random.default_rng(10)
     for trial in range(200):
-        block = rng.standard_normal((k, k + 1))          # two windows: columns 0..k-1, 1..k
+        # the tile's windows: columns j .. j + k - 1 of the block, j = 0 .. tile - 1
+        block = rng.standard_normal((k, tile + k - 1))
         if trial % 4 == 0:
             block = np.round(block)                      # many ties
         columns = []
-        for c in range(k + 1):
+        for c in range(tile + k - 1):
             col = _run_ops(list(block[:, c]), column_ops)
             assert col[:k] == sorted(block[:, c])
             columns.append(col)
-        merged = _run_ops(load(s_slots, columns[1:k]), s_ops)
-        kept = [merged[i] for i in survivors]
-        for side, own in ((0, columns[0]), (1, columns[k])):
-            window = block[:, side:side + k]
-            assert _run_ops(load(f_slots, [kept, own]), f_ops)[index] == np.median(window)
+        medians = [None] * tile
+        # offsets in the tree count from the first window's centre column
+        _tree_medians(root, None, lambda c: columns[c + half], load, medians)
+        for j in range(tile):
+            assert medians[j] == np.median(block[:, j:j + k])
 
 
 @pytest.mark.parametrize("k, width", [(3, 9), (5, 12), (7, 1), (7, 2), (7, 13)])
