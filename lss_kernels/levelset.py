@@ -205,14 +205,16 @@ class LevelSet:
         self.phi_x = f()     # the sign of dphi/dx orients the occlusion ray cast
         self.kappa, self.normal_x, self.normal_y = f(), f(), f()
         self.b_map = f()
-        # row-filtered scratch of the separable filters (phi: three orders; B: two)
-        self._t0, self._t1, self._t2 = f(), f(), f()
+        g, g1, g2 = gaussian_taps(params.curvature_sigma)
+        self.half = (len(g) - 1) // 2
+        # row-filtered scratch of the separable filters (phi: three orders; B: two), with
+        # ``half`` reflected rows above and below: the column passes read it unclamped
+        margin = lambda: pool.field(ti.f32, (H + 2 * self.half, W), offset=(-self.half, 0))
+        self._t0, self._t1, self._t2 = margin(), margin(), margin()
         self.flipped = pool.field(ti.i32, ())
         self.changed = pool.field(ti.i32, ())
         self.reference_sign = pool.field(ti.i8, (H, W))
         self.area = pool.field(ti.i32, ())
-        g, g1, g2 = gaussian_taps(params.curvature_sigma)
-        self.half = (len(g) - 1) // 2
         self.tap_values = np.stack([g, g1, g2]).astype(np.float32).tolist()
         self.curvature_clip = float(params.curvature_clip)
         self.boundary_clip = float(params.boundary_clip)
@@ -255,45 +257,44 @@ class LevelSet:
         return j
 
     @ti.func
+    def _mirror(self, i):
+        """:meth:`_reflect` for ``-W <= i < 2 W`` (no modulo)."""
+        return -1 - i if i < 0 else (2 * self.W - 1 - i if i >= self.W else i)
+
+    @ti.func
     def _filters(self, src: ti.template(), y, x, axis: ti.template(), orders: ti.template()):
         """Convolutions of ``src`` along ``axis`` (0: y, 1: x) with the Gaussian derivatives
         of ``orders`` at (y, x), as a vector.  The taps are compile-time constants, even
         (orders 0, 2) or odd (order 1), so each pair of samples at +-i is read once for all
-        orders.  Pixels farther than the half-width from the border skip the reflection and
-        run the taps unrolled; the few border pixels loop over them at run time (unrolled
-        there too, the filters took ~6 s more to compile, for no speed)."""
+        orders.  Along y, ``src`` is the row-filtered scratch, whose margin rows hold the
+        reflection: no index is clamped.  Along x, pixels farther than the half-width from
+        the border run the taps unrolled; the few border pixels reflect and loop over them at
+        run time (unrolled there too, the filters took ~6 s more to compile)."""
         out = ti.Vector.zero(ti.f32, ti.static(len(orders)))
         centre = src[y, x]
         for j in ti.static(range(len(orders))):
             out[j] = ti.static(float(self.tap_values[orders[j]][self.half])) * centre
-        n = ti.static(self.W if axis == 1 else self.H)
-        pos = x if ti.static(axis == 1) else y
-        if self.half <= pos < n - self.half:
+        if ti.static(axis == 0):
             for i in ti.static(range(1, self.half + 1)):
-                if ti.static(axis == 1):
-                    out = self._pair(out, src[y, x - i], src[y, x + i], i, orders)
-                else:
-                    out = self._pair(out, src[y - i, x], src[y + i, x], i, orders)
+                out = self._pair(out, src[y - i, x], src[y + i, x], i, orders)
+        elif self.half <= x < self.W - self.half:
+            for i in ti.static(range(1, self.half + 1)):
+                out = self._pair(out, src[y, x - i], src[y, x + i], i, orders)
+        elif ti.static(self.W > self.half):
+            for i in ti.static(range(1, self.half + 1)):
+                out = self._pair(out, src[y, self._mirror(x - i)], src[y, self._mirror(x + i)],
+                                 i, orders)
         else:
             taps = ti.static([ti.Vector(self.tap_values[o][self.half:]) for o in orders])
             for i in range(1, self.half + 1):
-                before, after = self._around(src, y, x, i, axis, n)
+                before = src[y, self._reflect(x - i, self.W)]
+                after = src[y, self._reflect(x + i, self.W)]
                 for j in ti.static(range(len(orders))):
                     if ti.static(orders[j] == 1):
                         out[j] += taps[j][i] * (before - after)
                     else:
                         out[j] += taps[j][i] * (before + after)
         return out
-
-    @ti.func
-    def _around(self, src: ti.template(), y, x, i, axis: ti.template(), n):
-        """src at -+i from (y, x) along ``axis``, reflected at the border."""
-        before, after = 0.0, 0.0
-        if ti.static(axis == 1):
-            before, after = src[y, self._reflect(x - i, n)], src[y, self._reflect(x + i, n)]
-        else:
-            before, after = src[self._reflect(y - i, n), x], src[self._reflect(y + i, n), x]
-        return before, after
 
     @ti.func
     def _pair(self, out, before, after, i: ti.template(), orders: ti.template()):
@@ -309,14 +310,32 @@ class LevelSet:
                 out[j] += w * even
         return out
 
+    @ti.func
+    def _put(self, scratch: ti.template(), y, x, value):
+        """scratch[y, x] = value, and into the margin rows that reflect row y."""
+        scratch[y, x] = value
+        if ti.static(self.H >= self.half):
+            if y < self.half:
+                scratch[-1 - y, x] = value
+            if y >= self.H - self.half:
+                scratch[2 * self.H - 1 - y, x] = value
+        else:                           # the reflection repeats: images fewer rows high than ``half``
+            for m in range(-self.half, 0):
+                if self._reflect(m, self.H) == y:
+                    scratch[m, x] = value
+            for m in range(self.H, self.H + self.half):
+                if self._reflect(m, self.H) == y:
+                    scratch[m, x] = value
+
     @ti.kernel
     def _rows3(self, src: ti.template()):
-        """Along x: orders 0, 1, 2 of src into the three scratch fields."""
+        """Along x: orders 0, 1, 2 of src into the three scratch fields (their margin rows:
+        those of the reflected rows)."""
         for y, x in src:
             v = self._filters(src, y, x, 1, (0, 1, 2))
-            self._t0[y, x] = v[0]
-            self._t1[y, x] = v[1]
-            self._t2[y, x] = v[2]
+            self._put(self._t0, y, x, v[0])
+            self._put(self._t1, y, x, v[1])
+            self._put(self._t2, y, x, v[2])
 
     @ti.kernel
     def _columns_curvature(self):
@@ -340,8 +359,8 @@ class LevelSet:
     def _rows2(self, src: ti.template()):
         for y, x in src:
             v = self._filters(src, y, x, 1, (0, 1))
-            self._t0[y, x] = v[0]
-            self._t1[y, x] = v[1]
+            self._put(self._t0, y, x, v[0])
+            self._put(self._t1, y, x, v[1])
 
     def derivatives(self):
         """phi_x, kappa and N from the current phi."""

@@ -504,6 +504,12 @@ def test_derivatives_of_an_image_smaller_than_the_filter(ti_arch):
     _check_derivatives_at_size(np.random.default_rng(15).standard_normal((10, 12)))
 
 
+def test_derivatives_of_an_image_between_one_and_two_filter_half_widths(ti_arch):
+    """20 x 17 pixels under a half-width of 14: most rows reflect into both margins of the
+    row-filtered scratch, most columns reflect at both sides."""
+    _check_derivatives_at_size(np.random.default_rng(17).standard_normal((20, 17)))
+
+
 def test_curvature_of_a_disc_is_minus_one_over_radius(levelset):
     y, x = np.mgrid[0:H, 0:W]
     r = 9.0
