@@ -38,7 +38,8 @@ def gaussian_taps(sigma, half_width=None):
     return g, g1, g2
 
 
-#: B_occ is filtered this many disparity planes at a time (its scratch).
+#: B_occ is filtered in blocks of rows holding as many values as this many planes (its
+#: scratch).
 CHUNK = 4
 
 
@@ -56,7 +57,8 @@ class BoundaryCosts:
         self.alpha = pool.vector(3, ti.f32, ())
         # scratch, kept for the solver's life: destroying an SNode tree makes Taichi drop
         # every compiled kernel, which a reset solver would then compile again
-        self._chunk = pool.field(ti.f32, (H, W, min(C, CHUNK)))   # B_occ, CHUNK planes at a time
+        rows = max(1, -(-H * min(C, CHUNK) // C))               # B_occ, a block of rows at a time
+        self._chunk = pool.field(ti.f32, (rows, W, C))
         self._edt3 = None
         self._edt2 = self._dist2 = None
 
@@ -81,30 +83,43 @@ class BoundaryCosts:
     @ti.func
     def _correlate(self, src: ti.template(), taps: ti.template(), y, x, k,
                    axis: ti.template()):
-        """sum_i taps[half + i] src at (y, x, k) + i along ``axis`` (0: y, 1: x), clamped."""
-        half = (taps.shape[0] - 1) // 2
+        """sum_i taps[half + i] src at (y, x, k) + i along ``axis`` (0: y, 1: x), clamped.
+        ``taps`` is a tuple (compile-time constants): away from the border the sum runs
+        unrolled and unclamped; near it, as a loop with clamped indices."""
+        half = ti.static((len(taps) - 1) // 2)
+        n = ti.static(self.H if axis == 0 else self.W)
+        pos = y if ti.static(axis == 0) else x
         s = 0.0
-        for i in range(-half, half + 1):
-            if ti.static(axis == 0):
-                s += taps[i + half] * src[ti.min(ti.max(y + i, 0), self.H - 1), x, k]
-            else:
-                s += taps[i + half] * src[y, ti.min(ti.max(x + i, 0), self.W - 1), k]
+        if half <= pos < n - half:
+            for i in ti.static(range(-half, half + 1)):
+                if ti.static(axis == 0):
+                    s += ti.static(taps[i + half]) * src[y + i, x, k]
+                else:
+                    s += ti.static(taps[i + half]) * src[y, x + i, k]
+        else:
+            weights = ti.Vector(taps)
+            for i in range(-half, half + 1):
+                if ti.static(axis == 0):
+                    s += weights[i + half] * src[ti.min(ti.max(y + i, 0), self.H - 1), x, k]
+                else:
+                    s += weights[i + half] * src[y, ti.min(ti.max(x + i, 0), self.W - 1), k]
         return s
 
     @ti.kernel
-    def _smooth_y(self, src: ti.template(), taps: ti.types.ndarray(), k0: ti.i32):
-        """Planes k0 .. k0 + CHUNK - 1 of src, smoothed along y, into the chunk."""
-        for y, x, j in self._chunk:
-            if k0 + j < self.C:
-                self._chunk[y, x, j] = self._correlate(src, taps, y, x, k0 + j, 0)
+    def _smooth_y(self, src: ti.template(), taps: ti.template(), y0: ti.i32):
+        """Rows y0 .. of src (as many as the chunk holds), smoothed along y, into the chunk
+        (the block and its filter reach are read in their memory order)."""
+        for r, x, k in self._chunk:
+            if y0 + r < self.H:
+                self._chunk[r, x, k] = self._correlate(src, taps, y0 + r, x, k, 0)
 
     @ti.kernel
-    def _occ_features(self, taps: ti.types.ndarray(), threshold: ti.f32, k0: ti.i32):
-        """B_occ's features of those planes: |d/dx of the chunk| above ``threshold``."""
-        for y, x, j in self._chunk:
-            if k0 + j < self.C:
-                s = self._correlate(self._chunk, taps, y, x, j, 1)
-                self.b_occ[y, x, k0 + j] = 0.0 if ti.abs(s) > threshold else INF
+    def _occ_features(self, taps: ti.template(), threshold: ti.f32, y0: ti.i32):
+        """B_occ's features of those rows: |d/dx of the chunk| above ``threshold``."""
+        for r, x, k in self._chunk:
+            if y0 + r < self.H:
+                s = self._correlate(self._chunk, taps, r, x, k, 1)
+                self.b_occ[y0 + r, x, k] = 0.0 if ti.abs(s) > threshold else INF
 
     @ti.kernel
     def _sqrt_normalise(self, vol: ti.template()):
@@ -125,12 +140,12 @@ class BoundaryCosts:
         # gradient of the smoothing kernel gives)
         dg = np.zeros_like(g)
         dg[1:-1] = (g[2:] - g[:-2]) / 2.0
-        g = g.astype(np.float32)
+        g = tuple(g.astype(np.float32).tolist())
         # correlation with dg[::-1] is convolution with dg
-        dg = dg[::-1].astype(np.float32).copy()
-        for k0 in range(0, self.C, self._chunk.shape[2]):
-            self._smooth_y(cost_level1, g, k0)
-            self._occ_features(dg, float(threshold), k0)
+        dg = tuple(dg[::-1].astype(np.float32).tolist())
+        for y0 in range(0, self.H, self._chunk.shape[0]):
+            self._smooth_y(cost_level1, g, y0)
+            self._occ_features(dg, float(threshold), y0)
         self._edt3.run(self.b_occ)
         self._sqrt_normalise(self.b_occ)
 
