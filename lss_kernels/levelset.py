@@ -138,9 +138,9 @@ def median_network(k):
        contain; it merges those its parent did not hold (first into one run, when there are
        several) with its parent's survivors, only as far as the ranks that can still be the
        median of one of its windows: with ``low`` values known to lie below, and each window
-       still to add ``rest`` values, held rank ``r`` can only be the median ``m = (k*k - 1) //
-       2`` if ``low + r <= m <= low + r + rest``; the others are dropped.  At a leaf (one window, ``rest = 0``) one
-       rank is left: the median.
+       still to add ``rest`` values, held rank ``r`` can only be the median
+       ``m = (k*k - 1) // 2`` if ``low + r <= m <= low + r + rest``; the others are dropped.
+       At a leaf (one window, ``rest = 0``) one rank is left: the median.
 
     A node is ``(columns, pre, slots, ops, keep, children, output)``: the offsets of its new
     columns from the tile's first window, ``pre = (slots, ops, positions)`` merging them into
@@ -319,7 +319,7 @@ class LevelSet:
                 scratch[-1 - y, x] = value
             if y >= self.H - self.half:
                 scratch[2 * self.H - 1 - y, x] = value
-        else:                           # the reflection repeats: images fewer rows high than ``half``
+        else:           # images fewer rows high than ``half``: the reflection repeats
             for m in range(-self.half, 0):
                 if self._reflect(m, self.H) == y:
                     scratch[m, x] = value
@@ -418,6 +418,7 @@ class LevelSet:
     # ---------------------------------------------------------------- median, re-init
     @ti.func
     def _apply(self, v: ti.template(), ops: ti.template()):
+        """Run a network's ``ops`` on the local vector ``v``, in place."""
         for op, a, b, keep_min, keep_max in ti.static(ops):
             if ti.static(op == "swap"):
                 v[a], v[b] = v[b], v[a]
@@ -484,7 +485,8 @@ class LevelSet:
         new columns with the parent's survivors ``held``; store the median at a leaf, else
         pass the survivors on to the children."""
         columns_at, pre, slots, ops, keep, children, output = ti.static(node)
-        columns = [self._columns[y, self._reflect(x0 + c, self.W)] for c in ti.static(columns_at)]
+        columns = [self._columns[y, self._reflect(x0 + c, self.W)]
+                   for c in ti.static(columns_at)]
         v = self._load(slots, [held, self._one_run(columns, pre)])
         self._apply(v, ops)
         if ti.static(output >= 0):
