@@ -103,9 +103,11 @@ def _merge_network(lengths, ranks):
     Each run is padded to ``block`` (the next power of two) slots, the runs to a power of
     two, and the padding is split between -inf and +inf so that rank ``r`` ends at position
     ``n_low + r``; the merge stages of Batcher's odd-even merge sort then run with every
-    comparator that touches padding resolved.  Returns ``(slots, ops, positions)``: the
-    initial content of each position (``"lo"``/``"hi"`` padding or ``(run, rank)``), the
-    ops (see :func:`median_network`) and where each of ``ranks`` ends."""
+    comparator that touches padding resolved, pruned to what the ranks depend on.  The
+    positions no op touches are then dropped and the rest renumbered.  Returns ``(slots,
+    ops, positions)``: the initial content of each (renumbered) position (``"lo"``/``"hi"``
+    padding or ``(run, rank)``), the ops (see :func:`median_network`) and where each of
+    ``ranks`` ends."""
     block = _next_pow2(max(lengths))
     size = _next_pow2(len(lengths) * block)
     n_low = (size - sum(lengths)) // 2
@@ -143,18 +145,20 @@ def median_network(k):
        At a leaf (one window, ``rest = 0``) one rank is left: the median.
 
     A node is ``(columns, pre, slots, ops, keep, children, output)``: the offsets of its new
-    columns from the tile's first window, ``pre = (slots, ops, positions)`` merging them into
+    columns from the centre column of the tile's first window, ``pre = (slots, ops, positions)`` merging them into
     one run (``()`` when there is one column, or at the root, whose ``slots`` take the columns
     as runs directly), the merge with the parent's survivors (run 0) and that run (run 1), the
     positions of the survivors in the merged vector, the child nodes and, at a leaf, the
-    window's index in the tile (-1 elsewhere).  For ``k = 7`` this takes 75 comparators per
-    window after the column sort, against 112.5 for pairs of windows (Adams' two-window tile)
-    and 210 for one window alone.
+    window's index in the tile (-1 elsewhere).  For ``k = 7`` this takes 75.25 comparators
+    per window after the column sort (78.75 ops with the fixed swaps), against 112.5 for
+    pairs of windows (Adams' two-window tile) and 210 for one window alone.
 
     Ops are ``(op, a, b, keep_min, keep_max)`` with ``op`` ``"cmp"`` (position ``a`` gets
     the minimum, ``b`` the maximum, each only if still needed) or ``"swap"`` (a comparator
     whose outcome padding decides).  Returns ``(column_ops, tile, root)``.
     """
+    if k < 3 or k % 2 == 0:
+        raise ValueError(f"median_network: k must be odd and >= 3, got {k}")
     block = _next_pow2(k)
     column_ops, _ = _resolve_padding(list(range(k)) + ["hi"] * (block - k), _batcher(block))
     column_ops = tuple((op, a, b, True, True) for op, a, b in column_ops)
@@ -267,9 +271,9 @@ class LevelSet:
         of ``orders`` at (y, x), as a vector.  The taps are compile-time constants, even
         (orders 0, 2) or odd (order 1), so each pair of samples at +-i is read once for all
         orders.  Along y, ``src`` is the row-filtered scratch, whose margin rows hold the
-        reflection: no index is clamped.  Along x, pixels farther than the half-width from
-        the border run the taps unrolled; the few border pixels reflect and loop over them at
-        run time (unrolled there too, the filters took ~6 s more to compile)."""
+        reflection: no index is clamped.  Along x, the taps run unrolled, with indices
+        mirrored (no modulo) for the pixels within the half-width of the border; only images
+        narrower than the half-width loop over the taps with the general reflection."""
         out = ti.Vector.zero(ti.f32, ti.static(len(orders)))
         centre = src[y, x]
         for j in ti.static(range(len(orders))):
@@ -509,6 +513,7 @@ class LevelSet:
 
     @ti.func
     def _gather(self, v, positions: ti.template()):
+        """The entries of ``v`` at ``positions``, as a new vector."""
         return ti.Vector([v[i] for i in ti.static(positions)])
 
     @ti.kernel
