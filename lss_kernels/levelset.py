@@ -145,13 +145,14 @@ def median_network(k):
        At a leaf (one window, ``rest = 0``) one rank is left: the median.
 
     A node is ``(columns, pre, slots, ops, keep, children, output)``: the offsets of its new
-    columns from the centre column of the tile's first window, ``pre = (slots, ops, positions)`` merging them into
-    one run (``()`` when there is one column, or at the root, whose ``slots`` take the columns
-    as runs directly), the merge with the parent's survivors (run 0) and that run (run 1), the
-    positions of the survivors in the merged vector, the child nodes and, at a leaf, the
-    window's index in the tile (-1 elsewhere).  For ``k = 7`` this takes 75.25 comparators
-    per window after the column sort (78.75 ops with the fixed swaps), against 112.5 for
-    pairs of windows (Adams' two-window tile) and 210 for one window alone.
+    columns from the centre column of the tile's first window, ``pre = (slots, ops,
+    positions)`` merging them into one run (``()`` when there is one column, or at the root,
+    whose ``slots`` take the columns as runs directly), the merge with the parent's
+    survivors (run 0) and that run (run 1), the positions of the survivors in the merged
+    vector, the child nodes and, at a leaf, the window's index in the tile (-1 elsewhere).
+    For ``k = 7`` this takes 75.25 comparators per window after the column sort (78.75 ops
+    with the fixed swaps), against 112.5 for pairs of windows (Adams' two-window tile) and
+    210 for one window alone.
 
     Ops are ``(op, a, b, keep_min, keep_max)`` with ``op`` ``"cmp"`` (position ``a`` gets
     the minimum, ``b`` the maximum, each only if still needed) or ``"swap"`` (a comparator
@@ -246,24 +247,25 @@ class LevelSet:
 
     # ---------------------------------------------------------------- helpers
     @ti.func
-    def _reflect(self, i, n):
-        """Symmetric border: -1 -> 0, -2 -> 1, n -> n - 1 (MATLAB's 'symmetric', numpy's
-        ``pad(mode="symmetric")``), repeated for offsets wider than the image.  Indices
-        inside the image skip the (costly) integer modulo."""
-        j = i
-        if i < 0 or i >= n:
-            j = i % (2 * n)
-            if j < 0:
-                # Taichi's algebraic simplification can turn (2 p - 1) % 2 into C's -1
-                j += 2 * n
-            if j >= n:
-                j = 2 * n - 1 - j
-        return j
+    def _mirror(self, i, n):
+        """One symmetric reflection at the borders of ``0 .. n - 1``: -1 -> 0, -2 -> 1,
+        n -> n - 1 (MATLAB's 'symmetric', numpy's ``pad(mode="symmetric")``); exact for
+        ``-n <= i < 2 n``, no modulo."""
+        return -1 - i if i < 0 else (2 * n - 1 - i if i >= n else i)
 
     @ti.func
-    def _mirror(self, i):
-        """:meth:`_reflect` for ``-W <= i < 2 W`` (no modulo)."""
-        return -1 - i if i < 0 else (2 * self.W - 1 - i if i >= self.W else i)
+    def _reflect(self, i, n):
+        """:meth:`_mirror` for any offset: the reflection repeats beyond one image width
+        (only then the costly integer modulo).  Indices inside the image skip both."""
+        j = i
+        if i < 0 or i >= n:
+            if i < -n or i >= 2 * n:
+                j = i % (2 * n)
+                if j < 0:
+                    # Taichi's algebraic simplification can turn (2 p - 1) % 2 into C's -1
+                    j += 2 * n
+            j = self._mirror(j, n)
+        return j
 
     @ti.func
     def _filters(self, src: ti.template(), y, x, axis: ti.template(), orders: ti.template()):
@@ -286,8 +288,8 @@ class LevelSet:
                 out = self._pair(out, src[y, x - i], src[y, x + i], i, orders)
         elif ti.static(self.W > self.half):
             for i in ti.static(range(1, self.half + 1)):
-                out = self._pair(out, src[y, self._mirror(x - i)], src[y, self._mirror(x + i)],
-                                 i, orders)
+                out = self._pair(out, src[y, self._mirror(x - i, self.W)],
+                                 src[y, self._mirror(x + i, self.W)], i, orders)
         else:
             taps = ti.static([ti.Vector(self.tap_values[o][self.half:]) for o in orders])
             for i in range(1, self.half + 1):

@@ -8,9 +8,9 @@ meets the background surface where ``t = Theta_1(x, y) - Theta_2(x - s t, y)`` a
 units), to the left of a left boundary (s = +1) and to the right of a right boundary.  The
 root is found by fixed-point iteration started at the jump at x (``FIXED_POINT_STEPS`` steps,
 left early when a step returns its input, which the remaining steps would repeat), which
-converges whenever |dTheta_2/dx| < 1 (any physical surface); with a fronto-parallel background it is exact after
-one step, and the authors' release uses that first step, ``Theta_1 - Theta_2``.  No jump
-(Theta_1 <= Theta_2) or no slope: delta_theta = 0.
+converges whenever |dTheta_2/dx| < 1 (any physical surface); with a fronto-parallel
+background it is exact after one step, and the authors' release uses that first step,
+``Theta_1 - Theta_2``.  No jump (Theta_1 <= Theta_2) or no slope: delta_theta = 0.
 
 A background pixel is visible (Eq. 1, second term) when phi(x) < 0 and phi(x + delta_theta) < 0.
 
