@@ -12,13 +12,17 @@ every step phi is median-filtered (``median_size`` squared, symmetric borders) a
 ``reinit_every`` steps re-initialised to ``phi_scale`` times a signed distance (the
 re-initialisation comes first, as in the authors' release).
 
-Frame: cyclopean ``(H, W)`` fields indexed ``[y, x]``; phi > 0 is the foreground.
+Frame: cyclopean ``(H, W)`` fields indexed ``[y, x]``; phi > 0 is the foreground.  The
+separable filters' row-filtered scratch and phi's derivatives (``phi_x``, ``kappa``,
+``normal_x``, ``normal_y``) are lane planes (:mod:`.lanes`): the column passes and the Eq. 2 step
+run a block of horizontally adjacent pixels per loop index.
 """
 import math
 
 import numpy as np
 import taichi as ti
 
+from . import lanes
 from .costs import gaussian_taps
 from .distance import INF, DistanceTransform
 
@@ -207,15 +211,18 @@ class LevelSet:
         f = lambda: pool.field(ti.f32, (H, W))
         self.phi = f()
         self.phi_next = f()
-        self.phi_x = f()     # the sign of dphi/dx orients the occlusion ray cast
-        self.kappa, self.normal_x, self.normal_y = f(), f(), f()
         self.b_map = f()
         g, g1, g2 = gaussian_taps(params.curvature_sigma)
         self.half = (len(g) - 1) // 2
+        self.lanes = lanes.lanes_for_arch()
+        self.blocks = (W + self.lanes - 1) // self.lanes
+        plane = lambda margin_rows=0: lanes.lane_plane(pool, H, W, self.lanes, margin_rows)
+        # lane planes: the sign of dphi/dx orients the occlusion ray cast; kappa and N enter
+        # the Eq. 2 step
+        self.phi_x, self.kappa, self.normal_x, self.normal_y = (plane() for _ in range(4))
         # row-filtered scratch of the separable filters (phi: three orders; B: two), with
         # ``half`` reflected rows above and below: the column passes read it unclamped
-        margin = lambda: pool.field(ti.f32, (H + 2 * self.half, W), offset=(-self.half, 0))
-        self._t0, self._t1, self._t2 = margin(), margin(), margin()
+        self._t0, self._t1, self._t2 = (plane(self.half) for _ in range(3))
         self.flipped = pool.field(ti.i32, ())
         self.changed = pool.field(ti.i32, ())
         self.reference_sign = pool.field(ti.i8, (H, W))
@@ -268,105 +275,122 @@ class LevelSet:
         return j
 
     @ti.func
-    def _filters(self, src: ti.template(), y, x, axis: ti.template(), orders: ti.template()):
-        """Convolutions of ``src`` along ``axis`` (0: y, 1: x) with the Gaussian derivatives
-        of ``orders`` at (y, x), as a vector.  The taps are compile-time constants, even
-        (orders 0, 2) or odd (order 1), so each pair of samples at +-i is read once for all
-        orders.  Along y, ``src`` is the row-filtered scratch, whose margin rows hold the
-        reflection: no index is clamped.  Along x, the taps run unrolled, with indices
-        mirrored (no modulo) for the pixels within the half-width of the border; only images
-        narrower than the half-width loop over the taps with the general reflection."""
-        out = ti.Vector.zero(ti.f32, ti.static(len(orders)))
-        centre = src[y, x]
-        for j in ti.static(range(len(orders))):
-            out[j] = ti.static(float(self.tap_values[orders[j]][self.half])) * centre
-        if ti.static(axis == 0):
-            for i in ti.static(range(1, self.half + 1)):
-                out = self._pair(out, src[y - i, x], src[y + i, x], i, orders)
-        elif self.half <= x < self.W - self.half:
-            for i in ti.static(range(1, self.half + 1)):
-                out = self._pair(out, src[y, x - i], src[y, x + i], i, orders)
-        elif ti.static(self.W > self.half):
-            for i in ti.static(range(1, self.half + 1)):
-                out = self._pair(out, src[y, self._mirror(x - i, self.W)],
-                                 src[y, self._mirror(x + i, self.W)], i, orders)
-        else:
-            taps = ti.static([ti.Vector(self.tap_values[o][self.half:]) for o in orders])
-            for i in range(1, self.half + 1):
-                before = src[y, self._reflect(x - i, self.W)]
-                after = src[y, self._reflect(x + i, self.W)]
-                for j in ti.static(range(len(orders))):
-                    if ti.static(orders[j] == 1):
-                        out[j] += taps[j][i] * (before - after)
-                    else:
-                        out[j] += taps[j][i] * (before + after)
+    def _taps(self, before, after, i: ti.template(), order: ti.template()):
+        """Taps +-i of the derivative of ``order``: w_i (before + after) for the even orders,
+        w_i (before - after) for the odd one (``before`` = src at pos - i, ``after`` at
+        pos + i).  The taps are compile-time constants, and each pair of samples is read
+        once for all orders."""
+        w = ti.static(float(self.tap_values[order][self.half + i]))
+        value = w * (before + after)
+        if ti.static(order == 1):
+            value = w * (before - after)
+        return value
+
+    @ti.func
+    def _row_filters(self, src: ti.template(), y, b, orders: ti.template()):
+        """Convolutions along x of ``src`` (a plane) with the Gaussian derivatives of
+        ``orders`` for the pixels of block ``b`` of row ``y``: one lane vector per order.  The
+        block's window (its pixels and ``half`` on either side) is read once, indices
+        reflected only for the blocks within the half-width of the border."""
+        n = ti.static(self.lanes + 2 * self.half)
+        x0 = b * self.lanes - self.half
+        window = ti.Vector.zero(ti.f32, n)
+        if 0 <= x0 and x0 + n <= self.W:
+            for k in ti.static(range(n)):
+                window[k] = src[y, x0 + k]
+        else:           # a loop, not unrolled: this branch would double the compile time
+            for k in range(n):
+                window[k] = src[y, self._reflect(x0 + k, self.W)]
+        centre = self._shifted(window, 0)
+        out = [ti.static(float(self.tap_values[o][self.half])) * centre
+               for o in ti.static(orders)]
+        for i in ti.static(range(1, self.half + 1)):
+            before = self._shifted(window, -i)
+            after = self._shifted(window, i)
+            for j in ti.static(range(len(orders))):
+                out[j] += self._taps(before, after, i, orders[j])
         return out
 
     @ti.func
-    def _pair(self, out, before, after, i: ti.template(), orders: ti.template()):
-        """Add taps +-i: w_i (before + after) for the even orders, w_i (before - after) for
-        the odd one (``before`` = src at pos - i, ``after`` at pos + i)."""
-        even = before + after
-        odd = before - after
-        for j in ti.static(range(len(orders))):
-            w = ti.static(float(self.tap_values[orders[j]][self.half + i]))
-            if ti.static(orders[j] == 1):
-                out[j] += w * odd
-            else:
-                out[j] += w * even
+    def _shifted(self, window, i: ti.template()):
+        """The block's pixels moved by ``i``, from its filter window."""
+        return ti.Vector([window[self.half + lane + i]
+                          for lane in ti.static(range(self.lanes))])
+
+    @ti.func
+    def _column_filters(self, src: ti.template(), y, b, orders: ti.template()):
+        """Convolutions along y of block ``b`` of row ``y`` of the row-filtered scratch
+        ``src`` (a lane plane) with the Gaussian derivatives of ``orders``: one lane vector
+        per order.  The scratch's margin rows hold the reflection, so no index is clamped."""
+        centre = src[y, b]
+        out = [ti.static(float(self.tap_values[o][self.half])) * centre
+               for o in ti.static(orders)]
+        for i in ti.static(range(1, self.half + 1)):
+            before = src[y - i, b]
+            after = src[y + i, b]
+            for j in ti.static(range(len(orders))):
+                out[j] += self._taps(before, after, i, orders[j])
         return out
 
     @ti.func
-    def _put(self, scratch: ti.template(), y, x, value):
-        """scratch[y, x] = value, and into the margin rows that reflect row y."""
-        scratch[y, x] = value
+    def _put(self, scratch: ti.template(), y, b, value):
+        """Block ``b`` of row ``y`` of the scratch <- value, and of the margin rows that
+        reflect row y."""
+        scratch[y, b] = value
         if ti.static(self.H >= self.half):
             if y < self.half:
-                scratch[-1 - y, x] = value
+                scratch[-1 - y, b] = value
             if y >= self.H - self.half:
-                scratch[2 * self.H - 1 - y, x] = value
+                scratch[2 * self.H - 1 - y, b] = value
         else:           # images fewer rows high than ``half``: the reflection repeats
             for m in range(-self.half, 0):
                 if self._reflect(m, self.H) == y:
-                    scratch[m, x] = value
+                    scratch[m, b] = value
             for m in range(self.H, self.H + self.half):
                 if self._reflect(m, self.H) == y:
-                    scratch[m, x] = value
+                    scratch[m, b] = value
+
+    def image(self, plane):
+        """One of the lane planes ``phi_x``, ``kappa``, ``normal_x``, ``normal_y`` as an
+        ``(H, W)`` float32 array."""
+        return lanes.to_image(plane, self.W)
 
     @ti.kernel
     def _rows3(self, src: ti.template()):
-        """Along x: orders 0, 1, 2 of src into the three scratch fields (their margin rows:
-        those of the reflected rows)."""
-        for y, x in src:
-            v = self._filters(src, y, x, 1, (0, 1, 2))
-            self._put(self._t0, y, x, v[0])
-            self._put(self._t1, y, x, v[1])
-            self._put(self._t2, y, x, v[2])
+        """Along x, a block of pixels at a time: orders 0, 1, 2 of src into the three scratch
+        lane planes (their margin rows: those of the reflected rows)."""
+        for y, b in self.kappa:
+            v0, v1, v2 = self._row_filters(src, y, b, (0, 1, 2))
+            self._put(self._t0, y, b, v0)
+            self._put(self._t1, y, b, v1)
+            self._put(self._t2, y, b, v2)
 
     @ti.kernel
     def _columns_curvature(self):
-        """Along y: the five derivatives of phi from the row-filtered scratch, and from them
-        phi_x, the clipped curvature kappa = div(grad phi / |grad phi|) and the normal
-        N = grad phi / |grad phi| (phi_y and the second derivatives are used here only)."""
+        """Along y, a block of pixels at a time: the five derivatives of phi from the
+        row-filtered scratch, and from them phi_x, the clipped curvature
+        kappa = div(grad phi / |grad phi|) and the normal N = grad phi / |grad phi| (phi_y and
+        the second derivatives are used here only).  Lanes past the right edge hold values
+        of the reflected image, which nothing reads."""
         clip = self.curvature_clip
-        for y, x in self.phi:
-            v0 = self._filters(self._t0, y, x, 0, (1, 2))
-            v1 = self._filters(self._t1, y, x, 0, (0, 1))
-            pxx = self._filters(self._t2, y, x, 0, (0,))[0]
-            px, py, pyy, pxy = v1[0], v0[0], v0[1], v1[1]
+        for y, b in self.kappa:
+            py, pyy = self._column_filters(self._t0, y, b, (1, 2))
+            px, pxy = self._column_filters(self._t1, y, b, (0, 1))
+            pxx = self._column_filters(self._t2, y, b, (0,))[0]
             norm = ti.sqrt(px * px + py * py) + 1e-10
             k = (pxx * py * py - 2.0 * px * py * pxy + pyy * px * px) / (norm * norm * norm)
-            self.phi_x[y, x] = px
-            self.kappa[y, x] = ti.min(ti.max(k, -clip), clip)
-            self.normal_x[y, x] = px / norm
-            self.normal_y[y, x] = py / norm
+            self.phi_x[y, b] = px
+            self.kappa[y, b] = ti.min(ti.max(k, -clip), clip)
+            self.normal_x[y, b] = px / norm
+            self.normal_y[y, b] = py / norm
 
     @ti.kernel
     def _rows2(self, src: ti.template()):
-        for y, x in src:
-            v = self._filters(src, y, x, 1, (0, 1))
-            self._put(self._t0, y, x, v[0])
-            self._put(self._t1, y, x, v[1])
+        """:meth:`_rows3` with orders 0 and 1 (for grad B)."""
+        for y, b in self.kappa:
+            v0, v1 = self._row_filters(src, y, b, (0, 1))
+            self._put(self._t0, y, b, v0)
+            self._put(self._t1, y, b, v1)
 
     def derivatives(self):
         """phi_x, kappa and N from the current phi."""
@@ -405,21 +429,30 @@ class LevelSet:
     @ti.kernel
     def _step(self, cost: ti.template(), C: ti.template(), shapes: ti.template(),
               occ: ti.template(), dt: ti.f32, mu: ti.f32):
+        """phi_next from phi by Eq. 2, a block of pixels at a time: the boundary term for the
+        whole block (grad B is the column pass of the separable filters, whose row pass ran
+        in ``_rows2``), then each pixel's data term."""
         clip = self.boundary_clip
-        for y, x in self.phi:
-            xf = ti.cast(x, ti.f32)
-            yf = ti.cast(y, ti.f32)
-            p = self.phi[y, x]
-            m1 = self._cost_at(cost, y, xf, shapes.value(0, xf, yf), C)
-            m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x], shapes.value(1, xf, yf), C)
-            # grad B: the column pass of the separable filters (rows in ``_rows2``)
-            b_x = self._filters(self._t1, y, x, 0, (0,))[0]
-            b_y = self._filters(self._t0, y, x, 0, (1,))[0]
-            bt = self.b_map[y, x] * self.kappa[y, x] + \
-                self.normal_x[y, x] * b_x + self.normal_y[y, x] * b_y
+        L = ti.static(self.lanes)
+        for y, b in self.kappa:
+            b_x = self._column_filters(self._t1, y, b, (0,))[0]
+            b_y = self._column_filters(self._t0, y, b, (1,))[0]
+            b_map = ti.Vector([self.b_map[y, ti.min(b * L + lane, self.W - 1)]
+                               for lane in ti.static(range(L))])
+            bt = b_map * self.kappa[y, b] + self.normal_x[y, b] * b_x + \
+                self.normal_y[y, b] * b_y
             bt = ti.min(ti.max(bt, -clip), clip)
-            dirac = (1.0 / math.pi) / (1.0 + p * p)
-            self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt)
+            for lane in range(L):     # not unrolled: compiles 3x faster, runs as fast
+                x = b * L + lane
+                if x < self.W:
+                    xf = ti.cast(x, ti.f32)
+                    yf = ti.cast(y, ti.f32)
+                    p = self.phi[y, x]
+                    m1 = self._cost_at(cost, y, xf, shapes.value(0, xf, yf), C)
+                    m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x],
+                                       shapes.value(1, xf, yf), C)
+                    dirac = (1.0 / math.pi) / (1.0 + p * p)
+                    self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt[lane])
 
     # ---------------------------------------------------------------- median, re-init
     @ti.func

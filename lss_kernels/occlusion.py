@@ -23,6 +23,8 @@ with two layers: the foreground is always in front).
 """
 import taichi as ti
 
+from . import lanes
+
 __all__ = ["OcclusionGeometry"]
 
 FIXED_POINT_STEPS = 6
@@ -54,16 +56,18 @@ class OcclusionGeometry:
     @ti.kernel
     def compute(self, shapes: ti.template(), phi: ti.template(), phi_x: ti.template(),
                 ray_cast: ti.i32):
-        """delta_theta and phi(x + delta_theta) for every pixel (``phi_x``: dphi/dx)."""
+        """delta_theta and phi(x + delta_theta) for every pixel (``phi_x``: dphi/dx, a plane
+        or a lane plane)."""
         for y, x in self.delta_theta:
             xf = ti.cast(x, ti.f32)
             yf = ti.cast(y, ti.f32)
             th1 = shapes.value(0, xf, yf)
             jump = th1 - shapes.value(1, xf, yf)
             s = 0.0
-            if phi_x[y, x] > 0:
+            slope = lanes.get(phi_x, y, x)
+            if slope > 0:
                 s = 1.0
-            elif phi_x[y, x] < 0:
+            elif slope < 0:
                 s = -1.0
             dt = 0.0
             if jump > 0 and s != 0:

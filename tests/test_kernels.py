@@ -467,14 +467,14 @@ def _compare_derivatives(ls, phi):
     tiny)."""
     phi = phi.astype(np.float32).astype(np.float64)
     px, py = ref.gaussian_derivatives(phi, 4.0)[:2]
-    np.testing.assert_allclose(ls.phi_x.to_numpy(), px, atol=1e-5)
+    np.testing.assert_allclose(ls.image(ls.phi_x), px, atol=1e-5)
     k, nx, ny = ref.curvature(phi, 4.0, 10.0)
     norm = np.hypot(px, py)
     sel = norm > 0.05 * norm.max()
     assert sel.mean() > 0.5
-    np.testing.assert_allclose(ls.kappa.to_numpy()[sel], k[sel], atol=2e-3)
-    np.testing.assert_allclose(ls.normal_x.to_numpy()[sel], nx[sel], atol=1e-4)
-    np.testing.assert_allclose(ls.normal_y.to_numpy()[sel], ny[sel], atol=1e-4)
+    np.testing.assert_allclose(ls.image(ls.kappa)[sel], k[sel], atol=2e-3)
+    np.testing.assert_allclose(ls.image(ls.normal_x)[sel], nx[sel], atol=1e-4)
+    np.testing.assert_allclose(ls.image(ls.normal_y)[sel], ny[sel], atol=1e-4)
 
 
 def _check_derivatives_at_size(phi):
@@ -511,13 +511,65 @@ def test_derivatives_of_an_image_between_one_and_two_filter_half_widths(ti_arch)
     _check_derivatives_at_size(np.random.default_rng(17).standard_normal((20, 17)))
 
 
+@pytest.mark.parametrize("lanes", [None, 1])
+def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
+    """The Eq. 2 step (``_step``, after the row pass of grad B in ``_rows2``) and phi's
+    derivatives against the float64 reference, on an image whose width (34) ends in a
+    partial block of lanes; also with blocks of one pixel, the GPUs' layout."""
+    from lss_kernels import lanes as lanes_module
+    from lss_kernels.levelset import LevelSet
+    if lanes is not None:
+        monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
+    from lss_kernels.occlusion import OcclusionGeometry
+    from lss_kernels.shapes import GlobalShapes
+    rng = np.random.default_rng(21)
+    p = Params()
+    pool = FieldPool()
+    ls = LevelSet(pool, H, W, p)
+    assert ls.lanes == (lanes or lanes_module.lanes_for_arch())
+    shapes = GlobalShapes(pool, H, W)
+    occ = OcclusionGeometry(pool, H, W, C)
+    cost = pool.field(ti.f32, (H, W, C))
+    pool.finalize()
+    ls.setup()
+    # Theta_1 and Theta_2 in the normalised quadratic basis; their maps at the pixels
+    theta = np.array([[0.4, -0.2, 0.3, 1.1, -0.6, 4.5], [0.0, 0.0, -0.2, 0.5, 0.3, 2.2]])
+    shapes.set(theta[0], theta[1])
+    y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+    xn, yn = (x - shapes.cx) * shapes.inv_s, (y - shapes.cy) * shapes.inv_s
+    basis = np.stack([xn * xn, xn * yn, yn * yn, xn, yn, np.ones_like(xn)])
+    th1, th2 = (np.tensordot(t.astype(np.float32), basis, 1) for t in theta)
+    phi = (_smooth_phi(rng) * 2.0).astype(np.float32)
+    b_map = (0.5 + rng.random((H, W))).astype(np.float32)
+    dtheta = rng.uniform(-3.0, 3.0, (H, W)).astype(np.float32)
+    volume = rng.random((H, W, C)).astype(np.float32)
+    ls.phi.from_numpy(phi)
+    ls.b_map.from_numpy(b_map)
+    occ.delta_theta.from_numpy(dtheta)
+    cost.from_numpy(volume)
+    ls.derivatives()
+    _compare_derivatives(ls, phi)
+    ls._rows2(ls.b_map)
+    ls._step(cost, C, shapes, occ, p.dt, p.mu)
+    kappa, n_x, n_y = ref.curvature(phi.astype(np.float64), p.curvature_sigma,
+                                    p.curvature_clip)
+    b_x, b_y = ref.gaussian_derivatives(b_map.astype(np.float64), p.curvature_sigma)[:2]
+    want = ref.levelset_step(phi, volume, th1, th2, dtheta, b_map, b_x, b_y, kappa, n_x, n_y,
+                             p.dt, p.mu, p.boundary_clip)
+    got = ls.phi_next.to_numpy()
+    assert np.abs(got - phi).max() > 0.05          # the step moves phi
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    ls.destroy()
+    pool.destroy()
+
+
 def test_curvature_of_a_disc_is_minus_one_over_radius(levelset):
     y, x = np.mgrid[0:H, 0:W]
     r = 9.0
     phi = (r - np.hypot(x - 17, y - 11)) * 0.01      # foreground inside: kappa = -1/r
     levelset.phi.from_numpy(phi.astype(np.float32))
     levelset.derivatives()
-    kappa = levelset.kappa.to_numpy()
+    kappa = levelset.image(levelset.kappa)
     # on the row through the centre, away from the top and bottom borders (symmetric borders
     # mirror the disc there)
     assert kappa[11, 17 - 9] == pytest.approx(-1 / r, rel=0.06)

@@ -116,9 +116,10 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     # key, two candidates, their costs and refined positions), one per median window row
     planes = (64 + 8 * levels + solver.params.median_size) * H * W * 4
     # the three row-filtered scratch planes of the separable filters carry half-width
-    # margin rows above and below
-    half = solver.levelset.half
-    filter_margins = 3 * 2 * half * W * 4
+    # margin rows above and below; they and phi's four derivative planes are lane planes,
+    # whose rows are padded to whole blocks of lanes
+    half, padded = solver.levelset.half, solver.levelset.blocks * solver.levelset.lanes
+    filter_margins = 3 * 2 * half * padded * 4 + 7 * H * (padded - W) * 4
     # set-up scratch kept for the solver's life: B_occ's block of rows (as many values as
     # CHUNK planes, rounded up to whole rows) and a 2-D distance map, and the distance
     # transforms' line buffers (3 arrays of lines x longest axis): phi's (all lines of the

@@ -1,0 +1,57 @@
+"""Planes stored in blocks of horizontally adjacent pixels, so that the CPU runs stencils in
+SIMD lanes.
+
+Taichi's CPU backend emits scalar code per loop index, and LLVM's SLP vectoriser packs it into
+vector instructions only when the results are stored as whole vectors: never through
+``a[y, x + l]`` in a scalar field.  A *lane plane* is a vector field of shape
+``(H, ceil(W / L))`` whose element ``[y, b]`` holds the ``L`` pixels ``x = b L .. b L + L - 1``
+of row ``y``.  The separable filters run a block per loop index: the row pass reads the
+block's window of a plane once and stores whole blocks; the column pass loads and stores
+whole blocks.  LLVM packs their sums into the lanes: phi's derivatives and curvature took
+2.9 -> 0.9 ms at 400x300 on this project's 2-core CPU.  Per-pixel kernels read single pixels
+with :func:`get`.
+
+``L`` is 8 (one AVX register of f32) on the CPU and 1 on GPUs, where each thread is already
+one pixel and a lane plane is an ordinary plane.  Lanes past the image's right edge are
+computed like the others (from reflected pixels) and never read as pixels.
+"""
+import numpy as np
+import taichi as ti
+
+__all__ = ["lanes_for_arch", "lane_plane", "get", "to_image"]
+
+
+def lanes_for_arch() -> int:
+    """Pixels per block for the arch Taichi runs on: 8 on the CPU, 1 elsewhere."""
+    return 8 if ti.lang.impl.current_cfg().arch == ti.cpu else 1
+
+
+def lane_plane(pool, height, width, lanes, margin_rows=0):
+    """A lane plane of ``height`` rows (plus ``margin_rows`` above and below, at negative
+    and past-the-end row indices) and ``width`` pixels, in blocks of ``lanes``."""
+    blocks = (int(width) + lanes - 1) // lanes
+    shape = (int(height) + 2 * margin_rows, blocks)
+    offset = (-margin_rows, 0) if margin_rows else None
+    return pool.vector(lanes, ti.f32, shape, offset=offset)
+
+
+@ti.func
+def get(f: ti.template(), y, x):
+    """Pixel (y, x) of a lane plane (or of a plain scalar plane)."""
+    value = 0.0
+    if ti.static(not isinstance(f, ti.MatrixField)):
+        value = f[y, x]
+    elif ti.static(f.n == 1):
+        value = f[y, x][0]
+    else:
+        value = f[y, x // f.n][x % f.n]
+    return value
+
+
+def to_image(f, width, margin_rows=0):
+    """A lane plane as a float32 ``(H, width)`` array (without its margin rows)."""
+    blocks = f.to_numpy()
+    rows = blocks.reshape(blocks.shape[0], -1)[:, :width]
+    if margin_rows:
+        rows = rows[margin_rows:-margin_rows]
+    return np.ascontiguousarray(rows, dtype=np.float32)
