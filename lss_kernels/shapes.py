@@ -19,6 +19,12 @@ NB = 6            # basis size
 NT = 21 + 6 + 1   # upper triangle of U U^T, U d, row count
 TILE = 16         # children per tile side at every level of the reduction
 _PAIRS = [(a, b) for a in range(NB) for b in range(a, NB)]  # upper triangle, row-major
+_EXPONENTS = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)]  # U_i = x^p y^q: (p, q)
+
+
+def _monomial(a, b):
+    """(p, q) of U_a U_b = x^p y^q."""
+    return _EXPONENTS[a][0] + _EXPONENTS[b][0], _EXPONENTS[a][1] + _EXPONENTS[b][1]
 
 
 def basis(xn, yn):
@@ -74,24 +80,42 @@ class GlobalShapes:
     @ti.kernel
     def _from_pixels(self, weight_fg: ti.template(), weight_bg: ti.template(),
                      target: ti.template(), out: ti.template()):
+        """The tiles' sums of the pixels' terms.  Every term is a monomial
+        ``w x_n^p y_n^q`` (times d-bar for ``U d``), so a row of a tile first sums
+        ``w x_n^p`` (p <= 4) and ``w d x_n^p`` (p <= 2) over its pixels, and the row's sums
+        enter the tile's 21 + 6 terms times the powers of its y_n: 16 multiply-adds per pixel
+        and region instead of 54."""
         for ty, tx in ti.ndrange(out.shape[0], out.shape[1]):
             acc = ti.Matrix.zero(ti.f32, 2, NT)
-            for iy, ix in ti.ndrange(TILE, TILE):
+            for iy in range(TILE):
                 y = ty * TILE + iy
-                x = tx * TILE + ix
-                if y < self.H and x < self.W:
-                    xn = (ti.cast(x, ti.f32) - self.cx) * self.inv_s
+                if y < self.H:
+                    row = ti.Matrix.zero(ti.f32, 2, 9)   # sum w x^p (p <= 4), w d x^p, n
+                    for ix in range(TILE):
+                        x = tx * TILE + ix
+                        if x < self.W:
+                            xn = (ti.cast(x, ti.f32) - self.cx) * self.inv_s
+                            d = target[y, x]
+                            for j in ti.static(range(2)):
+                                w = weight_fg[y, x] if j == 0 else weight_bg[y, x]
+                                if w > 0:
+                                    wp = w
+                                    for q in ti.static(range(5)):
+                                        row[j, q] += wp
+                                        if ti.static(q < 3):
+                                            row[j, 5 + q] += wp * d
+                                        wp *= xn
+                                    row[j, 8] += 1.0
                     yn = (ti.cast(y, ti.f32) - self.cy) * self.inv_s
-                    u = ti.Vector([xn * xn, xn * yn, yn * yn, xn, yn, 1.0])
-                    d = target[y, x]
+                    ypow = ti.Vector([1.0, yn, yn * yn, yn * yn * yn, yn * yn * yn * yn])
                     for j in ti.static(range(2)):
-                        w = weight_fg[y, x] if j == 0 else weight_bg[y, x]
-                        if w > 0:
-                            for n in ti.static(range(len(_PAIRS))):
-                                acc[j, n] += w * u[_PAIRS[n][0]] * u[_PAIRS[n][1]]
-                            for a in ti.static(range(NB)):
-                                acc[j, 21 + a] += w * u[a] * d
-                            acc[j, 27] += 1.0
+                        for n in ti.static(range(len(_PAIRS))):
+                            px, py = ti.static(_monomial(*_PAIRS[n]))
+                            acc[j, n] += row[j, px] * ypow[py]
+                        for a in ti.static(range(NB)):
+                            px, py = ti.static(_EXPONENTS[a])
+                            acc[j, 21 + a] += row[j, 5 + px] * ypow[py]
+                        acc[j, 27] += row[j, 8]
             for j, n in ti.static(ti.ndrange(2, NT)):
                 out[ty, tx, j, n] = acc[j, n]
 
