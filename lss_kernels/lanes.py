@@ -18,7 +18,7 @@ computed like the others (from reflected pixels) and never read as pixels.
 import numpy as np
 import taichi as ti
 
-__all__ = ["lanes_for_arch", "lane_plane", "get", "to_image"]
+__all__ = ["lanes_for_arch", "lane_plane", "get", "block", "to_image"]
 
 
 def lanes_for_arch() -> int:
@@ -46,6 +46,24 @@ def get(f: ti.template(), y, x):
     else:
         value = f[y, x // f.n][x % f.n]
     return value
+
+
+@ti.func
+def block(f: ti.template(), y, b, lanes: ti.template()):
+    """Block ``b`` of row ``y`` (``lanes`` pixels, as a vector) of a lane plane, or gathered
+    from a plain plane (pixels past its right edge repeat the last one)."""
+    value = ti.Vector.zero(ti.f32, lanes)
+    if ti.static(_is_lane_plane(f, lanes)):
+        value = f[y, b]
+    else:
+        last = f.shape[1] - 1
+        value = ti.Vector([get(f, y, ti.min(b * lanes + lane, last))
+                           for lane in ti.static(range(lanes))])
+    return value
+
+
+def _is_lane_plane(f, lanes):
+    return isinstance(f, ti.MatrixField) and f.n == lanes
 
 
 def to_image(f, width, margin_rows=0):

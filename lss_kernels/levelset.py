@@ -400,9 +400,14 @@ class LevelSet:
     # ---------------------------------------------------------------- boundary weight
     @ti.kernel
     def _b_map(self, costs: ti.template(), shapes: ti.template()):
-        for y, x in self.b_map:
-            c = shapes.value(0, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
-            self.b_map[y, x] = costs.b_at(y, x, c)
+        L = ti.static(self.lanes)
+        for y, b in self.kappa:
+            xs = ti.Vector([ti.cast(b * L + lane, ti.f32) for lane in ti.static(range(L))])
+            theta_1 = shapes.value(0, xs, ti.cast(y, ti.f32))
+            for lane in range(L):
+                x = b * L + lane
+                if x < self.W:
+                    self.b_map[y, x] = costs.b_at(y, x, theta_1[lane])
 
     def boundary_weight(self, costs, shapes):
         """B(x, y, Theta_1(x, y)) and the row pass of its gradient (the column pass runs in
@@ -442,15 +447,17 @@ class LevelSet:
             bt = b_map * self.kappa[y, b] + self.normal_x[y, b] * b_x + \
                 self.normal_y[y, b] * b_y
             bt = ti.min(ti.max(bt, -clip), clip)
+            xs = ti.Vector([ti.cast(b * L + lane, ti.f32) for lane in ti.static(range(L))])
+            yf = ti.cast(y, ti.f32)
+            theta_1 = shapes.value(0, xs, yf)
+            theta_2 = shapes.value(1, xs, yf)
             for lane in range(L):     # not unrolled: compiles 3x faster, runs as fast
                 x = b * L + lane
                 if x < self.W:
-                    xf = ti.cast(x, ti.f32)
-                    yf = ti.cast(y, ti.f32)
+                    xf = xs[lane]
                     p = self.phi[y, x]
-                    m1 = self._cost_at(cost, y, xf, shapes.value(0, xf, yf), C)
-                    m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x],
-                                       shapes.value(1, xf, yf), C)
+                    m1 = self._cost_at(cost, y, xf, theta_1[lane], C)
+                    m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x], theta_2[lane], C)
                     dirac = (1.0 / math.pi) / (1.0 + p * p)
                     self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt[lane])
 

@@ -36,6 +36,8 @@ class OcclusionGeometry:
 
     def __init__(self, pool, height, width, c_max):
         self.H, self.W, self.C = int(height), int(width), int(c_max)
+        self.lanes = lanes.lanes_for_arch()
+        self.blocks = (self.W + self.lanes - 1) // self.lanes
         self.delta_theta = pool.field(ti.f32, (self.H, self.W))
         self.phi_plus = pool.field(ti.f32, (self.H, self.W))
         self.disparity_left = pool.field(ti.f32, (self.H, self.W))
@@ -57,31 +59,33 @@ class OcclusionGeometry:
     def compute(self, shapes: ti.template(), phi: ti.template(), phi_x: ti.template(),
                 ray_cast: ti.i32):
         """delta_theta and phi(x + delta_theta) for every pixel (``phi_x``: dphi/dx, a plane
-        or a lane plane)."""
-        for y, x in self.delta_theta:
-            xf = ti.cast(x, ti.f32)
+        or a lane plane).  The ray cast runs a block of pixels in SIMD lanes: the block steps
+        until every lane has reached its fixed point (a lane there repeats it), so each pixel
+        gets the value of its own fixed-point iteration."""
+        L = ti.static(self.lanes)
+        for y, b in ti.ndrange(self.H, self.blocks):
+            xf = ti.Vector([ti.cast(b * L + lane, ti.f32) for lane in ti.static(range(L))])
             yf = ti.cast(y, ti.f32)
             th1 = shapes.value(0, xf, yf)
             jump = th1 - shapes.value(1, xf, yf)
-            s = 0.0
-            slope = lanes.get(phi_x, y, x)
-            if slope > 0:
-                s = 1.0
-            elif slope < 0:
-                s = -1.0
-            dt = 0.0
-            if jump > 0 and s != 0:
-                t = jump
-                if ray_cast:
-                    for _ in range(FIXED_POINT_STEPS):
-                        t_next = ti.min(ti.max(th1 - shapes.value(1, xf - s * t, yf), 0.0),
-                                        2.0 * self.C)
-                        if t_next == t:
-                            break  # a fixed point: the remaining steps would repeat it
-                        t = t_next
-                dt = s * t
-            self.delta_theta[y, x] = dt
-            self.phi_plus[y, x] = self.sample_row(phi, y, xf + dt)
+            slope = lanes.block(phi_x, y, b, L)
+            s = ti.select(slope > 0, 1.0, ti.select(slope < 0, -1.0, 0.0))
+            cast = (jump > 0) & (s != 0)
+            t = jump
+            if ray_cast:
+                for _ in range(FIXED_POINT_STEPS):
+                    t_next = ti.min(ti.max(th1 - shapes.value(1, xf - s * t, yf), 0.0),
+                                    2.0 * self.C)
+                    t_next = ti.select(cast, t_next, t)
+                    if all(t_next == t):
+                        break  # every fixed point reached: the remaining steps repeat it
+                    t = t_next
+            dt = ti.select(cast, s * t, 0.0)
+            for lane in range(L):
+                x = b * L + lane
+                if x < self.W:
+                    self.delta_theta[y, x] = dt[lane]
+                    self.phi_plus[y, x] = self.sample_row(phi, y, xf[lane] + dt[lane])
 
     @ti.func
     def _source(self, shapes: ti.template(), j, x, y, sign):

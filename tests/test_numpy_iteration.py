@@ -97,3 +97,22 @@ def test_median_and_reinitialisation():
     assert np.array_equal(sd > 0, mask > 0)
     assert sd[10, 10] == pytest.approx(0.01 * (5 - 0.5))   # 5 pixels to the nearest outside
     assert sd[0, 10] == pytest.approx(-0.01 * (5 - 0.5))
+
+
+def test_one_iteration_at_a_width_of_partial_lane_blocks(ti_arch):
+    """At a width of 61 pixels (7 blocks of 8 lanes and a partial one) the first iteration's
+    phi, its foreground and Theta match the specification as at 56 pixels."""
+    from lss_kernels.solver import Solver
+    left, right, init = synthetic_pair(61, 30, D_MAX, seed=2)
+    solver = Solver(left, right, D_MAX, init, params=PARAMS)
+    start = npi.state_from_solver(solver)
+    solver.step()
+    kernel = npi.state_from_solver(solver)
+    spec, _ = npi.iteration(start, PARAMS)
+    assert np.abs(kernel.phi - spec.phi).max() < 2e-5
+    assert np.abs(kernel.phi - start.phi).max() > 1e-3          # the step moved phi
+    differ = (kernel.phi > 0) != (spec.phi > 0)
+    assert np.all(np.abs(spec.phi[differ]) < 2e-5)
+    scale = max(1.0, np.abs(spec.theta).max())
+    assert np.abs(kernel.theta - spec.theta).max() < 1e-3 * scale
+    solver.close()
