@@ -233,7 +233,14 @@ class LevelSet:
         self.median_size = int(params.median_size)
         if self.median_size > 1:
             self._network = median_network(self.median_size)
-            self._columns = pool.vector(self.median_size, ti.f32, (H, W))
+            # the sorted window columns, in blocks of a tile's width (rank r of the block's
+            # column j at r * tile + j), with margin blocks of reflected columns on both
+            # sides: the merge reads a tile's columns at compile-time offsets, unreflected
+            tile, k = self._network[1], self.median_size
+            self._margin_blocks = -(-(k // 2) // tile)
+            blocks = -(-W // tile) + 2 * self._margin_blocks
+            self._sorted = pool.vector(k * tile, ti.f32, (H, blocks),
+                                       offset=(0, -self._margin_blocks))
         self.scale = float(params.phi_scale)
         # squared distances of the re-initialisation (also B_mono's scratch, see costs)
         self.distance_map = pool.field(ti.f32, (H, W, 1))
@@ -478,18 +485,30 @@ class LevelSet:
 
     @ti.kernel
     def _sort_columns(self, src: ti.template()):
-        """Stage 1 of the median: each pixel's window column, sorted (symmetric borders).
+        """Stage 1 of the median: every window column (symmetric borders), sorted, a block
+        of a tile's width of columns at a time in SIMD lanes, the margin blocks included.
         The networks are attributes read with ``ti.static``, not kernel arguments: Taichi
         hashes every template argument at each launch, which for these tuples of a few
         hundred comparators cost more than the kernel itself."""
         k = ti.static(self.median_size)
-        column_ops = ti.static(self._network[0])
-        for y, x in src:
-            v = ti.Vector.zero(ti.f32, k)
-            for r in ti.static(range(k)):
-                v[r] = src[self._reflect(y + r - k // 2, self.H), x]
+        tile, column_ops = ti.static(self._network[1], self._network[0])
+        for y, b in self._sorted:
+            rows = [self._reflect(y + r - k // 2, self.H) for r in ti.static(range(k))]
+            xs = [self._reflect(b * tile + j, self.W) for j in ti.static(range(tile))]
+            v = [ti.Vector([src[rows[r], xs[j]] for j in ti.static(range(tile))])
+                 for r in ti.static(range(k))]
             self._apply(v, column_ops)
-            self._columns[y, x] = v
+            self._sorted[y, b] = ti.Vector([v[r][j] for r in ti.static(range(k))
+                                            for j in ti.static(range(tile))])
+
+    @ti.func
+    def _column(self, y, t, c: ti.template()):
+        """The sorted column ``c`` (a compile-time offset, possibly negative) of the tile
+        ``t``'s first window, from the block scratch."""
+        tile = ti.static(self._network[1])
+        b = t + ti.static(c // tile)
+        return ti.Vector([self._sorted[y, b][ti.static(r * tile + c % tile)]
+                          for r in ti.static(range(self.median_size))])
 
     @ti.func
     def _load(self, slots: ti.template(), runs: ti.template()):
@@ -525,23 +544,23 @@ class LevelSet:
         dst[y, x] = value
 
     @ti.func
-    def _descend(self, dst: ti.template(), y, x0, held, node: ti.template(),
+    def _descend(self, dst: ti.template(), y, t, held, node: ti.template(),
                  count: ti.template()):
         """A node of the tile's tree below the root (see :func:`median_network`): merge its
         new columns with the parent's survivors ``held``; store the median at a leaf, else
         pass the survivors on to the children."""
         columns_at, pre, slots, ops, keep, children, output = ti.static(node)
-        columns = [self._columns[y, self._reflect(x0 + c, self.W)]
-                   for c in ti.static(columns_at)]
+        columns = [self._column(y, t, c) for c in ti.static(columns_at)]
         v = self._load(slots, [held, self._one_run(columns, pre)])
         self._apply(v, ops)
         if ti.static(output >= 0):
-            if x0 + output < self.W:
-                self._store(dst, y, x0 + output, v[ti.static(keep[0])], count)
+            x = t * ti.static(self._network[1]) + output
+            if x < self.W:
+                self._store(dst, y, x, v[ti.static(keep[0])], count)
         else:
             kept = self._gather(v, keep)
             for child in ti.static(children):
-                self._descend(dst, y, x0, kept, child, count)
+                self._descend(dst, y, t, kept, child, count)
 
     @ti.func
     def _one_run(self, columns: ti.template(), pre: ti.template()):
@@ -568,14 +587,12 @@ class LevelSet:
             (root[0], root[2], root[3], root[4], root[5]))
         self._start_count(count)
         for y, t in ti.ndrange(self.H, (self.W + tile - 1) // tile):
-            x0 = tile * t
-            columns = [self._columns[y, self._reflect(x0 + c, self.W)]
-                       for c in ti.static(columns_at)]
+            columns = [self._column(y, t, c) for c in ti.static(columns_at)]
             v = self._load(slots, columns)
             self._apply(v, ops)
             kept = self._gather(v, keep)
             for child in ti.static(children):
-                self._descend(dst, y, x0, kept, child, count)
+                self._descend(dst, y, t, kept, child, count)
 
     @ti.kernel
     def _copy(self, src: ti.template(), dst: ti.template(), count: ti.template()):
