@@ -199,7 +199,7 @@ class PatchHierarchy:
             cost_mean[y, x] = total / self.C
 
     # ------------------------------------------------------------------ upward, per iteration
-    @ti.kernel
+    @ti.func
     def _up_from_pixels(self, D: ti.template(), phi: ti.template(), phi_plus: ti.template(),
                         d_sum: ti.template(), phi_max: ti.template(),
                         phi_plus_min: ti.template(), offs: ti.template()):
@@ -219,7 +219,7 @@ class PatchHierarchy:
             phi_max[y, x] = hi
             phi_plus_min[y, x] = lo
 
-    @ti.kernel
+    @ti.func
     def _up_from_children(self, src_sum: ti.template(), src_max: ti.template(),
                           src_min: ti.template(), d_sum: ti.template(), phi_max: ti.template(),
                           phi_plus_min: ti.template(), offs: ti.template()):
@@ -237,15 +237,17 @@ class PatchHierarchy:
             phi_max[y, x] = hi
             phi_plus_min[y, x] = lo
 
-    def upward(self, D, phi, phi_plus):
+    @ti.kernel
+    def upward(self, D: ti.template(), phi: ti.template(), phi_plus: ti.template()):
         """Relay the patch sums of D and the patch extremes of phi and phi(x + delta_theta)
-        from the pixels up through every level (inputs: ``(H, W)`` f32 fields)."""
+        from the pixels up through every level (inputs: ``(H, W)`` f32 fields).  One launch:
+        the levels' loops run in order."""
         self._up_from_pixels(D, phi, phi_plus, self.d_sum[0], self.phi_max[0],
-                             self.phi_plus_min[0], self.levels[0].offsets)
-        for i in range(1, len(self.levels)):
+                             self.phi_plus_min[0], ti.static(self.levels[0].offsets))
+        for i in ti.static(range(1, len(self.levels))):
             self._up_from_children(self.d_sum[i - 1], self.phi_max[i - 1],
                                    self.phi_plus_min[i - 1], self.d_sum[i], self.phi_max[i],
-                                   self.phi_plus_min[i], self.levels[i].offsets)
+                                   self.phi_plus_min[i], ti.static(self.levels[i].offsets))
 
     # ------------------------------------------------------------------ messages (Eq. 4, 5)
     @ti.func
@@ -294,7 +296,7 @@ class PatchHierarchy:
                 c_hi = k + 1
         return c_lo, c_hi
 
-    @ti.kernel
+    @ti.func
     def _messages(self, cost: ti.template(), cost_mean: ti.template(), env_key: ti.template(),
                   env_arg: ti.template(), env_cost: ti.template(), env_refined: ti.template(),
                   count: ti.template(), d_sum: ti.template(), phi_max: ti.template(),
@@ -372,15 +374,20 @@ class PatchHierarchy:
             for key in self.env_key:
                 key.fill(0)
             self._cached_beta = beta
-        for i in range(len(self.levels)):
+        self._all_messages(beta, int(use_validity))
+
+    @ti.kernel
+    def _all_messages(self, beta: ti.f32, use_validity: ti.i32):
+        """:meth:`_messages` of every level, in one launch."""
+        for i in ti.static(range(len(self.levels))):
             self._messages(self.cost[i], self.cost_mean[i], self.env_key[i], self.env_arg[i],
                            self.env_cost[i], self.env_refined[i], self.count[i],
                            self.d_sum[i], self.phi_max[i], self.phi_plus_min[i],
                            self.d_p[i], self.sigma_p[i], self.valid[i], self.relay[i],
-                           beta, int(use_validity))
+                           beta, use_validity)
 
     # ------------------------------------------------------------------ downward (Eq. 7)
-    @ti.kernel
+    @ti.func
     def _down(self, relay: ti.template(), margin: ti.template(), parent_relay: ti.template(),
               parent_offs: ti.template(), parent_margin: ti.template()):
         H, W = self.H, self.W
@@ -401,7 +408,7 @@ class PatchHierarchy:
             relay[y, x, 0] = a
             relay[y, x, 1] = b
 
-    @ti.kernel
+    @ti.func
     def _to_pixels(self, relay: ti.template(), offs: ti.template()):
         for y, x in self.precision:
             a = 0.0
@@ -412,15 +419,17 @@ class PatchHierarchy:
             self.precision[y, x] = a
             self.consensus_mean[y, x] = b / a if a > 0 else 0.0
 
+    @ti.kernel
     def downward(self):
         """Relay the messages down to the pixels: fills ``precision`` (1/sigma^2) and
-        ``consensus_mean`` (d-bar; 0 where no valid patch contains the pixel)."""
+        ``consensus_mean`` (d-bar; 0 where no valid patch contains the pixel).  One launch:
+        the levels' loops run in order, from the top."""
         # the top level has no margin: its relay is just its own messages
-        for i in range(len(self.levels) - 2, -1, -1):
-            up = self.levels[i + 1]
-            self._down(self.relay[i], self.levels[i].margin, self.relay[i + 1], up.offsets,
-                       up.margin)
-        self._to_pixels(self.relay[0], self.levels[0].offsets)
+        for i in ti.static(range(len(self.levels) - 2, -1, -1)):
+            self._down(self.relay[i], ti.static(self.levels[i].margin), self.relay[i + 1],
+                       ti.static(self.levels[i + 1].offsets),
+                       ti.static(self.levels[i + 1].margin))
+        self._to_pixels(self.relay[0], ti.static(self.levels[0].offsets))
 
     # ------------------------------------------------------------------ inspection
     @ti.kernel

@@ -362,7 +362,7 @@ class LevelSet:
         ``(H, W)`` float32 array."""
         return lanes.to_image(plane, self.W)
 
-    @ti.kernel
+    @ti.func
     def _rows3(self, src: ti.template()):
         """Along x, a block of pixels at a time: orders 0, 1, 2 of src into the three scratch
         lane planes (their margin rows: those of the reflected rows)."""
@@ -372,7 +372,7 @@ class LevelSet:
             self._put(self._t1, y, b, v1)
             self._put(self._t2, y, b, v2)
 
-    @ti.kernel
+    @ti.func
     def _columns_curvature(self):
         """Along y, a block of pixels at a time: the five derivatives of phi from the
         row-filtered scratch, and from them phi_x, the clipped curvature
@@ -391,7 +391,7 @@ class LevelSet:
             self.normal_x[y, b] = px / norm
             self.normal_y[y, b] = py / norm
 
-    @ti.kernel
+    @ti.func
     def _rows2(self, src: ti.template()):
         """:meth:`_rows3` with orders 0 and 1 (for grad B)."""
         for y, b in self.kappa:
@@ -399,13 +399,14 @@ class LevelSet:
             self._put(self._t0, y, b, v0)
             self._put(self._t1, y, b, v1)
 
+    @ti.kernel
     def derivatives(self):
-        """phi_x, kappa and N from the current phi."""
+        """phi_x, kappa and N from the current phi (both passes in one launch)."""
         self._rows3(self.phi)
         self._columns_curvature()
 
     # ---------------------------------------------------------------- boundary weight
-    @ti.kernel
+    @ti.func
     def _b_map(self, costs: ti.template(), shapes: ti.template()):
         L = ti.static(self.lanes)
         for y, b in self.kappa:
@@ -416,9 +417,10 @@ class LevelSet:
                 if x < self.W:
                     self.b_map[y, x] = costs.b_at(y, x, theta_1[lane])
 
-    def boundary_weight(self, costs, shapes):
+    @ti.kernel
+    def boundary_weight(self, costs: ti.template(), shapes: ti.template()):
         """B(x, y, Theta_1(x, y)) and the row pass of its gradient (the column pass runs in
-        the Eq. 2 step, which alone needs grad B)."""
+        the Eq. 2 step, which alone needs grad B), in one launch."""
         self._b_map(costs, shapes)
         self._rows2(self.b_map)
 
@@ -483,7 +485,7 @@ class LevelSet:
                 if ti.static(keep_max):
                     v[b] = hi
 
-    @ti.kernel
+    @ti.func
     def _sort_columns(self, src: ti.template()):
         """Stage 1 of the median: every window column (symmetric borders), sorted, a block
         of a tile's width of columns at a time in SIMD lanes, the margin blocks included.
@@ -577,7 +579,7 @@ class LevelSet:
         """The entries of ``v`` at ``positions``, as a new vector."""
         return ti.Vector([v[i] for i in ti.static(positions)])
 
-    @ti.kernel
+    @ti.func
     def _median_of_columns(self, dst: ti.template(), count: ti.template()):
         """Stage 2: the medians of a tile of horizontally adjacent windows from the sorted
         columns, through the tree of :func:`median_network`.  With ``count``, ``flipped`` and
@@ -633,7 +635,12 @@ class LevelSet:
         pixels > 0 (``area``)."""
         if self.median_size == 1:
             self._copy(src, dst, count)
-            return
+        else:
+            self._median(src, dst, count)
+
+    @ti.kernel
+    def _median(self, src: ti.template(), dst: ti.template(), count: ti.template()):
+        """Both stages of :meth:`median`, in one launch."""
         self._sort_columns(src)
         self._median_of_columns(dst, count)
 

@@ -77,7 +77,7 @@ class GlobalShapes:
         t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
         return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
 
-    @ti.kernel
+    @ti.func
     def _from_pixels(self, weight_fg: ti.template(), weight_bg: ti.template(),
                      target: ti.template(), out: ti.template()):
         """The tiles' sums of the pixels' terms.  Every term is a monomial
@@ -119,7 +119,7 @@ class GlobalShapes:
             for j, n in ti.static(ti.ndrange(2, NT)):
                 out[ty, tx, j, n] = acc[j, n]
 
-    @ti.kernel
+    @ti.func
     def _from_tiles(self, src: ti.template(), out: ti.template()):
         for ty, tx, j, n in out:
             s = 0.0
@@ -130,7 +130,7 @@ class GlobalShapes:
                     s += src[y, x, j, n]
             out[ty, tx, j, n] = s
 
-    @ti.kernel
+    @ti.func
     def _solve_root(self, root: ti.template()):
         ti.loop_config(serialize=True)
         for j in range(2):
@@ -178,12 +178,14 @@ class GlobalShapes:
                     self.theta[j, a] = sol[a]
             self.updated[j] = ok
 
-    def fit(self, weight_fg, weight_bg, target):
+    @ti.kernel
+    def fit(self, weight_fg: ti.template(), weight_bg: ti.template(), target: ti.template()):
         """Weighted least squares of ``target`` (``(H, W)``, the consensus mean) over each
-        region, ``weight_*`` (``(H, W)``) being 0 outside it; updates ``theta``."""
+        region, ``weight_*`` (``(H, W)``) being 0 outside it; updates ``theta``.  One
+        launch: the reduction's levels run in order."""
         self._from_pixels(weight_fg, weight_bg, target, self.tiles[0])
-        for src, out in zip(self.tiles, self.tiles[1:]):
-            self._from_tiles(src, out)
+        for i in ti.static(range(1, len(self.tiles))):
+            self._from_tiles(self.tiles[i - 1], self.tiles[i])
         self._solve_root(self.tiles[-1])
 
     def set(self, theta_fg, theta_bg):

@@ -511,11 +511,24 @@ def test_derivatives_of_an_image_between_one_and_two_filter_half_widths(ti_arch)
     _check_derivatives_at_size(np.random.default_rng(17).standard_normal((20, 17)))
 
 
+@ti.data_oriented
+class _GivenB:
+    """Boundary costs whose B(x, y, c) is a given map, whatever c."""
+
+    def __init__(self, b):
+        self.b = b
+
+    @ti.func
+    def b_at(self, y, x, c):
+        return self.b[y, x]
+
+
 @pytest.mark.parametrize("lanes", [None, 1])
 def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
-    """The Eq. 2 step (``_step``, after the row pass of grad B in ``_rows2``) and phi's
-    derivatives against the float64 reference, on an image whose width (34) ends in a
-    partial block of lanes; also with blocks of one pixel, the GPUs' layout."""
+    """The Eq. 2 step (``_step``, after ``boundary_weight``: B at Theta_1 and the row pass
+    of grad B) and phi's derivatives against the float64 reference, on an image whose width
+    (34) ends in a partial block of lanes; also with blocks of one pixel, the GPUs'
+    layout.  B is a given map here (a stand-in for the boundary costs' ``b_at``)."""
     from lss_kernels import lanes as lanes_module
     from lss_kernels.levelset import LevelSet
     if lanes is not None:
@@ -530,6 +543,7 @@ def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
     shapes = GlobalShapes(pool, H, W)
     occ = OcclusionGeometry(pool, H, W, C)
     cost = pool.field(ti.f32, (H, W, C))
+    given_b = _GivenB(pool.field(ti.f32, (H, W)))
     pool.finalize()
     ls.setup()
     # Theta_1 and Theta_2 in the normalised quadratic basis; their maps at the pixels
@@ -544,12 +558,13 @@ def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
     dtheta = rng.uniform(-3.0, 3.0, (H, W)).astype(np.float32)
     volume = rng.random((H, W, C)).astype(np.float32)
     ls.phi.from_numpy(phi)
-    ls.b_map.from_numpy(b_map)
+    given_b.b.from_numpy(b_map)
     occ.delta_theta.from_numpy(dtheta)
     cost.from_numpy(volume)
     ls.derivatives()
     _compare_derivatives(ls, phi)
-    ls._rows2(ls.b_map)
+    ls.boundary_weight(given_b, shapes)
+    np.testing.assert_array_equal(ls.b_map.to_numpy(), b_map)
     ls._step(cost, C, shapes, occ, p.dt, p.mu)
     kappa, n_x, n_y = ref.curvature(phi.astype(np.float64), p.curvature_sigma,
                                     p.curvature_clip)
