@@ -8,12 +8,12 @@ vector instructions only when the results are stored as whole vectors: never thr
 of row ``y``.  The separable filters run a block per loop index: the row pass reads the
 block's window of a plane once and stores whole blocks; the column pass loads and stores
 whole blocks.  LLVM packs their sums into the lanes: phi's derivatives and curvature took
-2.9 -> 0.9 ms at 400x300 on this project's 2-core CPU.  Per-pixel kernels read single pixels
-with :func:`get`.
+2.9 -> 0.9 ms at 400x300 on this project's 2-core CPU.  :func:`block` loads a block for the
+kernels that run per block (from a plain plane too, gathered with :func:`get`).
 
 ``L`` is 8 (one AVX register of f32) on the CPU and 1 on GPUs, where each thread is already
 one pixel and a lane plane is an ordinary plane.  Lanes past the image's right edge are
-computed like the others (from reflected pixels) and never read as pixels.
+computed like the others (from reflected pixels) and never stored as pixels.
 """
 import numpy as np
 import taichi as ti

@@ -378,7 +378,8 @@ class LevelSet:
         row-filtered scratch, and from them phi_x, the clipped curvature
         kappa = div(grad phi / |grad phi|) and the normal N = grad phi / |grad phi| (phi_y and
         the second derivatives are used here only).  Lanes past the right edge hold values
-        of the reflected image, which nothing reads."""
+        of the reflected image: block kernels compute with them but never store them as
+        pixels."""
         clip = self.curvature_clip
         for y, b in self.kappa:
             py, pyy = self._column_filters(self._t0, y, b, (1, 2))

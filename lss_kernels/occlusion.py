@@ -7,7 +7,8 @@ meets the background surface where ``t = Theta_1(x, y) - Theta_2(x - s t, y)`` a
 ``delta_theta = x - x' = s t``: the occluded extent equals the disparity jump (cyclopean
 units), to the left of a left boundary (s = +1) and to the right of a right boundary.  The
 root is found by fixed-point iteration started at the jump at x (``FIXED_POINT_STEPS`` steps,
-left early when a step returns its input, which the remaining steps would repeat), which
+left early once a step returns its input, which the remaining steps would repeat; a block of
+pixels in SIMD lanes steps until every lane has), which
 converges whenever |dTheta_2/dx| < 1 (any physical surface); with a fronto-parallel
 background it is exact after one step, and the authors' release uses that first step,
 ``Theta_1 - Theta_2``.  No jump (Theta_1 <= Theta_2) or no slope: delta_theta = 0.
@@ -70,7 +71,8 @@ class OcclusionGeometry:
             jump = th1 - shapes.value(1, xf, yf)
             slope = lanes.block(phi_x, y, b, L)
             s = ti.select(slope > 0, 1.0, ti.select(slope < 0, -1.0, 0.0))
-            cast = (jump > 0) & (s != 0)
+            # lanes past the right edge (no pixel) must not keep the block stepping
+            cast = (jump > 0) & (s != 0) & (xf < self.W)
             t = jump
             if ray_cast:
                 for _ in range(FIXED_POINT_STEPS):
