@@ -8,8 +8,8 @@ vector instructions only when the results are stored as whole vectors: never thr
 of row ``y``.  The separable filters run a block per loop index: the row pass reads the
 block's window of a plane once and stores whole blocks; the column pass loads and stores
 whole blocks.  LLVM packs their sums into the lanes: phi's derivatives and curvature took
-2.9 -> 0.9 ms at 400x300 on this project's 2-core CPU.  :func:`block` loads a block for the
-kernels that run per block (from a plain plane too, gathered with :func:`get`).
+2.9 -> 0.9 ms at 400x300 on this project's 2-core CPU.  Kernels that run per block load a
+block with :func:`block` (from a plain plane too) and its x coordinates with :func:`columns`.
 
 ``L`` is 8 (one AVX register of f32) on the CPU and 1 on GPUs, where each thread is already
 one pixel and a lane plane is an ordinary plane.  Lanes past the image's right edge are
@@ -18,7 +18,7 @@ computed like the others (from reflected pixels) and never stored as pixels.
 import numpy as np
 import taichi as ti
 
-__all__ = ["lanes_for_arch", "lane_plane", "get", "block", "to_image"]
+__all__ = ["lanes_for_arch", "block_count", "lane_plane", "block", "columns", "to_image"]
 
 
 def lanes_for_arch() -> int:
@@ -26,44 +26,37 @@ def lanes_for_arch() -> int:
     return 8 if ti.lang.impl.current_cfg().arch == ti.cpu else 1
 
 
+def block_count(width, lanes):
+    """Blocks of ``lanes`` pixels that cover ``width`` pixels (the last may be partial)."""
+    return (int(width) + lanes - 1) // lanes
+
+
 def lane_plane(pool, height, width, lanes, margin_rows=0):
     """A lane plane of ``height`` rows (plus ``margin_rows`` above and below, at negative
     and past-the-end row indices) and ``width`` pixels, in blocks of ``lanes``."""
-    blocks = (int(width) + lanes - 1) // lanes
-    shape = (int(height) + 2 * margin_rows, blocks)
+    shape = (int(height) + 2 * margin_rows, block_count(width, lanes))
     offset = (-margin_rows, 0) if margin_rows else None
     return pool.vector(lanes, ti.f32, shape, offset=offset)
 
 
 @ti.func
-def get(f: ti.template(), y, x):
-    """Pixel (y, x) of a lane plane (or of a plain scalar plane)."""
-    value = 0.0
-    if ti.static(not isinstance(f, ti.MatrixField)):
-        value = f[y, x]
-    elif ti.static(f.n == 1):
-        value = f[y, x][0]
-    else:
-        value = f[y, x // f.n][x % f.n]
-    return value
-
-
-@ti.func
 def block(f: ti.template(), y, b, lanes: ti.template()):
     """Block ``b`` of row ``y`` (``lanes`` pixels, as a vector) of a lane plane, or gathered
-    from a plain plane (pixels past its right edge repeat the last one)."""
+    from a plain scalar plane (pixels past its right edge repeat the last one)."""
     value = ti.Vector.zero(ti.f32, lanes)
-    if ti.static(_is_lane_plane(f, lanes)):
+    if ti.static(isinstance(f, ti.MatrixField)):
         value = f[y, b]
     else:
         last = f.shape[1] - 1
-        value = ti.Vector([get(f, y, ti.min(b * lanes + lane, last))
+        value = ti.Vector([f[y, ti.min(b * lanes + lane, last)]
                            for lane in ti.static(range(lanes))])
     return value
 
 
-def _is_lane_plane(f, lanes):
-    return isinstance(f, ti.MatrixField) and f.n == lanes
+@ti.func
+def columns(b, lanes: ti.template()):
+    """The x coordinates of block ``b``'s pixels, as a float vector."""
+    return ti.Vector([ti.cast(b * lanes + lane, ti.f32) for lane in ti.static(range(lanes))])
 
 
 def to_image(f, width, margin_rows=0):

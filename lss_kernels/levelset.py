@@ -215,7 +215,7 @@ class LevelSet:
         g, g1, g2 = gaussian_taps(params.curvature_sigma)
         self.half = (len(g) - 1) // 2
         self.lanes = lanes.lanes_for_arch()
-        self.blocks = (W + self.lanes - 1) // self.lanes
+        self.blocks = lanes.block_count(W, self.lanes)
         plane = lambda margin_rows=0: lanes.lane_plane(pool, H, W, self.lanes, margin_rows)
         # lane planes: the sign of dphi/dx orients the occlusion ray cast; kappa and N enter
         # the Eq. 2 step
@@ -238,7 +238,7 @@ class LevelSet:
             # sides: the merge reads a tile's columns at compile-time offsets, unreflected
             tile, k = self._network[1], self.median_size
             self._margin_blocks = -(-(k // 2) // tile)
-            blocks = -(-W // tile) + 2 * self._margin_blocks
+            blocks = lanes.block_count(W, tile) + 2 * self._margin_blocks
             self._sorted = pool.vector(k * tile, ti.f32, (H, blocks),
                                        offset=(0, -self._margin_blocks))
         self.scale = float(params.phi_scale)
@@ -411,8 +411,7 @@ class LevelSet:
     def _b_map(self, costs: ti.template(), shapes: ti.template()):
         L = ti.static(self.lanes)
         for y, b in self.kappa:
-            xs = ti.Vector([ti.cast(b * L + lane, ti.f32) for lane in ti.static(range(L))])
-            theta_1 = shapes.value(0, xs, ti.cast(y, ti.f32))
+            theta_1 = shapes.value(0, lanes.columns(b, L), ti.cast(y, ti.f32))
             for lane in range(L):
                 x = b * L + lane
                 if x < self.W:
@@ -452,12 +451,11 @@ class LevelSet:
         for y, b in self.kappa:
             b_x = self._column_filters(self._t1, y, b, (0,))[0]
             b_y = self._column_filters(self._t0, y, b, (1,))[0]
-            b_map = ti.Vector([self.b_map[y, ti.min(b * L + lane, self.W - 1)]
-                               for lane in ti.static(range(L))])
+            b_map = lanes.block(self.b_map, y, b, L)
             bt = b_map * self.kappa[y, b] + self.normal_x[y, b] * b_x + \
                 self.normal_y[y, b] * b_y
             bt = ti.min(ti.max(bt, -clip), clip)
-            xs = ti.Vector([ti.cast(b * L + lane, ti.f32) for lane in ti.static(range(L))])
+            xs = lanes.columns(b, L)
             yf = ti.cast(y, ti.f32)
             theta_1 = shapes.value(0, xs, yf)
             theta_2 = shapes.value(1, xs, yf)

@@ -38,7 +38,7 @@ class OcclusionGeometry:
     def __init__(self, pool, height, width, c_max):
         self.H, self.W, self.C = int(height), int(width), int(c_max)
         self.lanes = lanes.lanes_for_arch()
-        self.blocks = (self.W + self.lanes - 1) // self.lanes
+        self.blocks = lanes.block_count(self.W, self.lanes)
         self.delta_theta = pool.field(ti.f32, (self.H, self.W))
         self.phi_plus = pool.field(ti.f32, (self.H, self.W))
         self.disparity_left = pool.field(ti.f32, (self.H, self.W))
@@ -65,7 +65,7 @@ class OcclusionGeometry:
         gets the value of its own fixed-point iteration."""
         L = ti.static(self.lanes)
         for y, b in ti.ndrange(self.H, self.blocks):
-            xf = ti.Vector([ti.cast(b * L + lane, ti.f32) for lane in ti.static(range(L))])
+            xf = lanes.columns(b, L)
             yf = ti.cast(y, ti.f32)
             th1 = shapes.value(0, xf, yf)
             jump = th1 - shapes.value(1, xf, yf)
