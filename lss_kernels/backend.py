@@ -13,6 +13,12 @@ ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu", "auto")
 
 _state = {"arch": None, "threads": None}
 
+#: Memory order of a ``(H, W, c_max)`` volume that is read at a disparity per pixel (the
+#: Eq. 2 step's matching costs, B at Theta_1): rows, then disparities, then columns, so that
+#: neighbours along a row at the same disparity are neighbours in memory.  Indexing stays
+#: ``[y, x, c - 1]``.  At 760x340x50 an iteration took 34.6 -> 29.0 ms on the 2-core CPU.
+ROWS_DISPARITIES_COLUMNS = (0, 2, 1)
+
 
 def _resolve(arch: str):
     if arch == "auto":
@@ -149,9 +155,14 @@ class FieldPool:
         self.nbytes = 0
         self.fields = []
 
-    def _place(self, f, shape, offset, nbytes):
+    def _place(self, f, shape, offset, nbytes, order=None):
         shape = tuple(int(s) for s in shape)
-        if shape:
+        if shape and order is not None:
+            node = self._builder
+            for axis in order:
+                node = node.dense(ti.axes(axis), shape[axis])
+            node.place(f, offset=offset)
+        elif shape:
             axes = ti.axes(*range(len(shape)))
             self._builder.dense(axes, shape).place(f, offset=offset)
         else:
@@ -163,8 +174,10 @@ class FieldPool:
         self.fields.append(f)
         return f
 
-    def field(self, dtype, shape, offset=None):
-        return self._place(ti.field(dtype), shape, offset, _bytes(dtype))
+    def field(self, dtype, shape, offset=None, order=None):
+        """A scalar field; ``order``: its axes from the outermost to the innermost in memory
+        (default: as indexed, the last axis innermost)."""
+        return self._place(ti.field(dtype), shape, offset, _bytes(dtype), order)
 
     def vector(self, n, dtype, shape, offset=None):
         return self._place(ti.Vector.field(n, dtype), shape, offset, n * _bytes(dtype))

@@ -26,6 +26,8 @@ children centred there.
 import numpy as np
 import taichi as ti
 
+from .backend import ROWS_DISPARITIES_COLUMNS
+
 __all__ = ["Level", "PatchHierarchy", "level_geometry"]
 
 
@@ -85,13 +87,16 @@ class PatchHierarchy:
         self.levels = level_geometry(sizes)
         H, W, C = self.H, self.W, self.C
 
-        def padded(lev, *extra, dtype=ti.f32):
+        def padded(lev, *extra, dtype=ti.f32, order=None):
             m = lev.margin
             return pool.field(dtype, (H + 2 * m, W + 2 * m) + extra,
-                              offset=(-m, -m) + (0,) * len(extra))
+                              offset=(-m, -m) + (0,) * len(extra), order=order)
 
-        # upward: normalised patch-mean cost volumes, in-image pixel counts, D sums, extremes
-        self.cost = [padded(lev, C) for lev in self.levels]
+        # upward: normalised patch-mean cost volumes, in-image pixel counts, D sums, extremes.
+        # Level 1 is also M of the Eq. 2 step, read at Theta_j per pixel: rows, disparities,
+        # columns in memory; the patch levels are scanned along c per patch (messages)
+        self.cost = [padded(lev, C, order=ROWS_DISPARITIES_COLUMNS if i == 0 else None)
+                     for i, lev in enumerate(self.levels)]
         self.count = [padded(lev, dtype=ti.i32) for lev in self.levels]
         self.d_sum = [padded(lev) for lev in self.levels]
         self.phi_max = [padded(lev) for lev in self.levels]

@@ -55,3 +55,31 @@ def test_compile_errors_still_point_at_the_line(ti_arch):
             k()
         message = str(err.value)
         assert f'line {line}, in _broken' in message and "undefined_name" in message
+
+
+def test_pool_field_in_another_memory_order_keeps_its_indexing(ti_arch):
+    import numpy as np
+    from lss_kernels.backend import ROWS_DISPARITIES_COLUMNS, FieldPool
+    pool = FieldPool()
+    vol = pool.field(ti.f32, (3, 5, 4), order=ROWS_DISPARITIES_COLUMNS)
+    out = pool.field(ti.f32, (3, 5, 4))
+    pool.finalize()
+    try:
+        values = np.arange(60, dtype=np.float32).reshape(3, 5, 4)
+        vol.from_numpy(values)
+
+        @ti.kernel
+        def copy():
+            for y, x, k in vol:          # iterates in vol's memory order
+                out[y, x, k] = vol[y, x, k] + 1000.0 * (vol[y, x, k] == values_at(y, x, k))
+
+        @ti.func
+        def values_at(y, x, k):
+            return ti.cast(y * 20 + x * 4 + k, ti.f32)
+
+        copy()
+        np.testing.assert_array_equal(vol.to_numpy(), values)
+        np.testing.assert_array_equal(out.to_numpy(), values + 1000.0)
+        assert pool.nbytes == 2 * 60 * 4
+    finally:
+        pool.destroy()
