@@ -26,6 +26,7 @@ children centred there.
 import numpy as np
 import taichi as ti
 
+from . import lanes
 from .backend import ROWS_DISPARITIES_COLUMNS
 
 __all__ = ["Level", "PatchHierarchy", "level_geometry"]
@@ -60,6 +61,30 @@ def level_geometry(sizes):
         levels[lev_idx].margin = margin
         margin += max(abs(o) for o in levels[lev_idx].offsets)
     return levels
+
+
+def column_spans(levels, width, lanes_per_block):
+    """The columns every level's lane planes hold, ``(left, right)``: patch centres
+    ``x = -left .. right - 1``, both multiples of ``lanes_per_block``.
+
+    The top level holds the image's blocks.  Going down, each level holds the reach of its
+    parent's children beyond the parent's columns, rounded out to whole blocks (with one
+    pixel per block: exactly the levels' margins); level 1 also reaches the pixels' blocks
+    and one reach of its own beyond them (the consensus reads it there).  Patch centres
+    beyond a level's margin only ever hold zero relays and out-of-image sums."""
+    L = int(lanes_per_block)
+    round_up = lambda v: -(-v // L) * L
+    spans = [None] * len(levels)
+    left, right = 0, round_up(width)
+    spans[-1] = (left, right)
+    for i in range(len(levels) - 2, -1, -1):
+        reach = max(abs(o) for o in levels[i + 1].offsets)
+        left, right = round_up(left + reach), round_up(right + reach)
+        spans[i] = (left, right)
+    reach = max(abs(o) for o in levels[0].offsets)
+    left, right = spans[0]
+    spans[0] = (max(left, round_up(reach)), max(right, round_up(round_up(width) + reach)))
+    return spans
 
 
 @ti.data_oriented
@@ -98,9 +123,20 @@ class PatchHierarchy:
         self.cost = [padded(lev, C, order=ROWS_DISPARITIES_COLUMNS if i == 0 else None)
                      for i, lev in enumerate(self.levels)]
         self.count = [padded(lev, dtype=ti.i32) for lev in self.levels]
-        self.d_sum = [padded(lev) for lev in self.levels]
-        self.phi_max = [padded(lev) for lev in self.levels]
-        self.phi_plus_min = [padded(lev) for lev in self.levels]
+        # the per-iteration relays are lane planes (blocks of ``lanes`` patch centres along
+        # x; see :mod:`lss_kernels.lanes`): the upward and downward stencils run a block per
+        # loop index.  Columns -left .. right - 1 of :func:`column_spans`, rows as ``padded``
+        self.lanes = lanes.lanes_for_arch()
+        self.spans = column_spans(self.levels, W, self.lanes)
+
+        def lane_level(i):
+            m, (left, right) = self.levels[i].margin, self.spans[i]
+            return pool.vector(self.lanes, ti.f32, (H + 2 * m, (left + right) // self.lanes),
+                               offset=(-m, -left // self.lanes))
+
+        self.d_sum = [lane_level(i) for i in range(len(self.levels))]
+        self.phi_max = [lane_level(i) for i in range(len(self.levels))]
+        self.phi_plus_min = [lane_level(i) for i in range(len(self.levels))]
         # messages of the in-image patches
         self.d_p = [pool.field(ti.f32, (H, W)) for _ in self.levels]
         self.sigma_p = [pool.field(ti.f32, (H, W)) for _ in self.levels]
@@ -115,8 +151,9 @@ class PatchHierarchy:
         self.env_cost = [pool.vector(2, ti.f32, (H, W)) for _ in self.levels]
         self.env_refined = [pool.vector(2, ti.f32, (H, W)) for _ in self.levels]
         self._cached_beta = None
-        # downward relays of (w / sigma^2, w d / sigma^2)
-        self.relay = [padded(lev, 2) for lev in self.levels]
+        # downward relays of w / sigma^2 and w d / sigma^2
+        self.relay_a = [lane_level(i) for i in range(len(self.levels))]
+        self.relay_b = [lane_level(i) for i in range(len(self.levels))]
         # the consensus (Eq. 7)
         self.precision = pool.field(ti.f32, (H, W))       # 1 / sigma^2
         self.consensus_mean = pool.field(ti.f32, (H, W))  # d-bar, cyclopean units
@@ -205,42 +242,93 @@ class PatchHierarchy:
 
     # ------------------------------------------------------------------ upward, per iteration
     @ti.func
+    def _shifted(self, plane: ti.template(), y, b, o: ti.template()):
+        """Centres ``b L + o .. b L + o + L - 1`` of row ``y`` of a level's lane plane (``o``
+        a compile-time offset): one or two whole blocks, their lanes moved by ``o mod L``."""
+        L = ti.static(self.lanes)
+        q = ti.static(o // L)
+        r = ti.static(o % L)
+        value = plane[y, b + q]
+        if ti.static(r != 0):
+            value = self._merge_lanes(value, plane[y, b + q + 1], r)
+        return value
+
+    @ti.func
+    def _merge_lanes(self, first, second, r: ti.template()):
+        """Lanes ``r .. L - 1`` of ``first`` followed by lanes ``0 .. r - 1`` of
+        ``second``."""
+        L = ti.static(self.lanes)
+        pair = [first, second]
+        return ti.Vector([pair[ti.static((r + l) // L)][ti.static((r + l) % L)]
+                          for l in ti.static(range(L))])
+
+    @ti.func
+    def _window(self, src: ti.template(), y, x0, lo: ti.template(), hi: ti.template(),
+                fill):
+        """Pixels ``x0 + lo .. x0 + L - 1 + hi`` of row ``y`` of a plain ``(H, W)`` plane as a
+        vector, ``fill`` for those outside the image (unclamped reads away from the
+        borders; a run-time loop near them)."""
+        n = ti.static(self.lanes + hi - lo)
+        window = ti.Vector.zero(ti.f32, n)
+        if 0 <= x0 + lo and x0 + n + lo <= self.W:
+            for k in ti.static(range(n)):
+                window[k] = src[y, x0 + lo + k]
+        else:
+            for k in range(n):
+                window[k] = fill
+                x = x0 + lo + k
+                if 0 <= x < self.W:
+                    window[k] = src[y, x]
+        return window
+
+    @ti.func
     def _up_from_pixels(self, D: ti.template(), phi: ti.template(), phi_plus: ti.template(),
                         d_sum: ti.template(), phi_max: ti.template(),
                         phi_plus_min: ti.template(), offs: ti.template()):
-        H, W = self.H, self.W
-        for y, x in d_sum:
-            s = 0.0
-            hi = -1e30
-            lo = 1e30
-            for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
+        """Level 1 from the pixels, a block of patch centres at a time: each row of the
+        patches reads its window of the three planes once (out-of-image pixels as the
+        neutral 0, -inf, +inf, so every patch sums and compares in the same order)."""
+        L = ti.static(self.lanes)
+        lo = ti.static(offs[0])                 # the offsets ascend
+        hi = ti.static(offs[len(offs) - 1])
+        for y, b in d_sum:
+            x0 = b * L
+            s = ti.Vector.zero(ti.f32, L)
+            most = ti.Vector([-1e30] * L)
+            least = ti.Vector([1e30] * L)
+            for jy in ti.static(range(len(offs))):
                 py = y + offs[jy]
-                px = x + offs[jx]
-                if 0 <= py < H and 0 <= px < W:
-                    s += D[py, px]
-                    hi = ti.max(hi, phi[py, px])
-                    lo = ti.min(lo, phi_plus[py, px])
-            d_sum[y, x] = s
-            phi_max[y, x] = hi
-            phi_plus_min[y, x] = lo
+                if 0 <= py < self.H:
+                    wd = self._window(D, py, x0, lo, hi, 0.0)
+                    wp = self._window(phi, py, x0, lo, hi, -1e30)
+                    wq = self._window(phi_plus, py, x0, lo, hi, 1e30)
+                    for jx in ti.static(range(len(offs))):
+                        k = ti.static(offs[jx] - lo)
+                        s += ti.Vector([wd[k + l] for l in ti.static(range(L))])
+                        most = ti.max(most, ti.Vector([wp[k + l] for l in ti.static(range(L))]))
+                        least = ti.min(least,
+                                       ti.Vector([wq[k + l] for l in ti.static(range(L))]))
+            d_sum[y, b] = s
+            phi_max[y, b] = most
+            phi_plus_min[y, b] = least
 
     @ti.func
     def _up_from_children(self, src_sum: ti.template(), src_max: ti.template(),
                           src_min: ti.template(), d_sum: ti.template(), phi_max: ti.template(),
                           phi_plus_min: ti.template(), offs: ti.template()):
-        for y, x in d_sum:
-            s = 0.0
-            hi = -1e30
-            lo = 1e30
+        L = ti.static(self.lanes)
+        for y, b in d_sum:
+            s = ti.Vector.zero(ti.f32, L)
+            most = ti.Vector([-1e30] * L)
+            least = ti.Vector([1e30] * L)
             for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
                 cy = y + offs[jy]
-                cx = x + offs[jx]
-                s += src_sum[cy, cx]
-                hi = ti.max(hi, src_max[cy, cx])
-                lo = ti.min(lo, src_min[cy, cx])
-            d_sum[y, x] = s
-            phi_max[y, x] = hi
-            phi_plus_min[y, x] = lo
+                s += self._shifted(src_sum, cy, b, offs[jx])
+                most = ti.max(most, self._shifted(src_max, cy, b, offs[jx]))
+                least = ti.min(least, self._shifted(src_min, cy, b, offs[jx]))
+            d_sum[y, b] = s
+            phi_max[y, b] = most
+            phi_plus_min[y, b] = least
 
     @ti.kernel
     def upward(self, D: ti.template(), phi: ti.template(), phi_plus: ti.template()):
@@ -253,6 +341,14 @@ class PatchHierarchy:
             self._up_from_children(self.d_sum[i - 1], self.phi_max[i - 1],
                                    self.phi_plus_min[i - 1], self.d_sum[i], self.phi_max[i],
                                    self.phi_plus_min[i], ti.static(self.levels[i].offsets))
+
+    def level_image(self, planes, level):
+        """The in-image patch centres of one level of ``d_sum``, ``phi_max``,
+        ``phi_plus_min``, ``relay_a`` or ``relay_b`` as a float32 ``(H, W)`` array."""
+        blocks = planes[level].to_numpy()
+        rows = blocks.reshape(blocks.shape[0], -1)
+        m, left = self.levels[level].margin, self.spans[level][0]
+        return np.ascontiguousarray(rows[m:m + self.H, left:left + self.W], dtype=np.float32)
 
     # ------------------------------------------------------------------ messages (Eq. 4, 5)
     @ti.func
@@ -306,63 +402,91 @@ class PatchHierarchy:
                   env_arg: ti.template(), env_cost: ti.template(), env_refined: ti.template(),
                   count: ti.template(), d_sum: ti.template(), phi_max: ti.template(),
                   phi_plus_min: ti.template(), d_p: ti.template(), sigma_p: ti.template(),
-                  valid: ti.template(), relay: ti.template(), beta: ti.f32,
+                  valid: ti.template(), relay_a: ti.template(), relay_b: ti.template(),
+                  beta: ti.f32,
                   use_validity: ti.i32):
         """Eq. 4 and Eq. 5 per patch: d_p and sigma_p of the full scan of
         C_p(c) + beta |c - m| (up to float rounding of near-ties).  The two candidates of
         :meth:`_side_argmins` are cached per patch and searched again only where
         (floor m, ceil m) moved since the last call, so an iteration mostly streams 2-D
-        fields."""
+        fields.  A block of patch centres at a time: the relays in and out as whole blocks,
+        the patches one by one (a run-time loop over the lanes)."""
         C = self.C
-        for y, x in d_p:
-            w = 1
-            if use_validity:
-                w = 1 if (phi_max[y, x] > 0) != (phi_plus_min[y, x] < 0) else 0   # Eq. 4
-            valid[y, x] = w
-            a = 0.0
-            b = 0.0
-            if w == 1:
-                m = ti.min(ti.max(d_sum[y, x] / ti.max(count[y, x], 1), 0.0),
-                           ti.cast(C, ti.f32))
-                lo = ti.cast(ti.floor(m), ti.i32)          # candidates c <= lo ...
-                hi = ti.max(ti.cast(ti.ceil(m), ti.i32), 1)  # ... and c >= hi
-                key = 2 * lo + 1 + ti.cast(hi == lo, ti.i32)
-                if env_key[y, x] != key:
-                    c_lo, c_hi = self._side_argmins(cost, y, x, lo, hi, beta)
-                    env_arg[y, x] = ti.Vector([c_lo, c_hi])
-                    env_cost[y, x] = ti.Vector([cost[y, x, ti.max(c_lo, 1) - 1],
-                                                cost[y, x, ti.max(c_hi, 1) - 1]])
-                    env_refined[y, x] = ti.Vector([self._refine(cost, y, x, ti.max(c_lo, 1)),
-                                                   self._refine(cost, y, x, ti.max(c_hi, 1))])
-                    env_key[y, x] = key
-                ca = env_arg[y, x]
-                cv = env_cost[y, x]
-                best = 1e30
-                arg = 1
-                refined = 1.0
-                if ca[0] >= 1:
-                    best = cv[0] + beta * (m - ca[0])
-                    arg = ca[0]
-                    refined = env_refined[y, x][0]
-                if ca[1] >= 1:
-                    v = cv[1] + beta * (ca[1] - m)
-                    if v < best:
-                        best = v
-                        arg = ca[1]
-                        refined = env_refined[y, x][1]
-                # mean over c of beta |c - m|, in closed form
-                f = ti.cast(lo, ti.f32)
-                cf = ti.cast(C, ti.f32)
-                l1 = f * m - 0.5 * f * (f + 1.0) + 0.5 * (cf * (cf + 1.0) - f * (f + 1.0)) \
-                    - (cf - f) * m
-                spread = cost_mean[y, x] + beta * l1 / cf - best
-                sigma = cf / (spread + 1e-8)
-                d_p[y, x] = refined
-                sigma_p[y, x] = sigma
-                a = 1.0 / (sigma * sigma)
-                b = a * refined
-            relay[y, x, 0] = a
-            relay[y, x, 1] = b
+        L = ti.static(self.lanes)
+        for y, blk in ti.ndrange(self.H, self.spans[-1][1] // L):
+            sums = d_sum[y, blk]
+            most = phi_max[y, blk]
+            least = phi_plus_min[y, blk]
+            out_a = ti.Vector.zero(ti.f32, L)
+            out_b = ti.Vector.zero(ti.f32, L)
+            for lane in range(L):
+                x = blk * L + lane
+                if x < self.W:
+                    a, b = self._message(cost, cost_mean, env_key, env_arg, env_cost,
+                                         env_refined, count, d_p, sigma_p, valid, y, x,
+                                         sums[lane], most[lane], least[lane], beta,
+                                         use_validity)
+                    out_a[lane] = a
+                    out_b[lane] = b
+            relay_a[y, blk] = out_a
+            relay_b[y, blk] = out_b
+
+    @ti.func
+    def _message(self, cost: ti.template(), cost_mean: ti.template(), env_key: ti.template(),
+                 env_arg: ti.template(), env_cost: ti.template(), env_refined: ti.template(),
+                 count: ti.template(), d_p: ti.template(), sigma_p: ti.template(),
+                 valid: ti.template(), y, x, d_sum, phi_max, phi_plus_min, beta,
+                 use_validity):
+        """The patch at ``(y, x)`` of :meth:`_messages`, given its sum of D and extremes of
+        phi and phi(x + delta_theta); returns its relays (w / sigma^2, w d_p / sigma^2)."""
+        C = self.C
+        w = 1
+        if use_validity:
+            w = 1 if (phi_max > 0) != (phi_plus_min < 0) else 0                  # Eq. 4
+        valid[y, x] = w
+        a = 0.0
+        b = 0.0
+        if w == 1:
+            m = ti.min(ti.max(d_sum / ti.max(count[y, x], 1), 0.0),
+                       ti.cast(C, ti.f32))
+            lo = ti.cast(ti.floor(m), ti.i32)          # candidates c <= lo ...
+            hi = ti.max(ti.cast(ti.ceil(m), ti.i32), 1)  # ... and c >= hi
+            key = 2 * lo + 1 + ti.cast(hi == lo, ti.i32)
+            if env_key[y, x] != key:
+                c_lo, c_hi = self._side_argmins(cost, y, x, lo, hi, beta)
+                env_arg[y, x] = ti.Vector([c_lo, c_hi])
+                env_cost[y, x] = ti.Vector([cost[y, x, ti.max(c_lo, 1) - 1],
+                                            cost[y, x, ti.max(c_hi, 1) - 1]])
+                env_refined[y, x] = ti.Vector([self._refine(cost, y, x, ti.max(c_lo, 1)),
+                                               self._refine(cost, y, x, ti.max(c_hi, 1))])
+                env_key[y, x] = key
+            ca = env_arg[y, x]
+            cv = env_cost[y, x]
+            best = 1e30
+            arg = 1
+            refined = 1.0
+            if ca[0] >= 1:
+                best = cv[0] + beta * (m - ca[0])
+                arg = ca[0]
+                refined = env_refined[y, x][0]
+            if ca[1] >= 1:
+                v = cv[1] + beta * (ca[1] - m)
+                if v < best:
+                    best = v
+                    arg = ca[1]
+                    refined = env_refined[y, x][1]
+            # mean over c of beta |c - m|, in closed form
+            f = ti.cast(lo, ti.f32)
+            cf = ti.cast(C, ti.f32)
+            l1 = f * m - 0.5 * f * (f + 1.0) + 0.5 * (cf * (cf + 1.0) - f * (f + 1.0)) \
+                - (cf - f) * m
+            spread = cost_mean[y, x] + beta * l1 / cf - best
+            sigma = cf / (spread + 1e-8)
+            d_p[y, x] = refined
+            sigma_p[y, x] = sigma
+            a = 1.0 / (sigma * sigma)
+            b = a * refined
+        return a, b
 
     def messages(self, beta, use_prior, use_validity):
         """Per-patch (d_p, sigma_p) and w_p at every level; seeds the downward relays.
@@ -388,53 +512,90 @@ class PatchHierarchy:
             self._messages(self.cost[i], self.cost_mean[i], self.env_key[i], self.env_arg[i],
                            self.env_cost[i], self.env_refined[i], self.count[i],
                            self.d_sum[i], self.phi_max[i], self.phi_plus_min[i],
-                           self.d_p[i], self.sigma_p[i], self.valid[i], self.relay[i],
+                           self.d_p[i], self.sigma_p[i], self.valid[i], self.relay_a[i],
+                           self.relay_b[i],
                            beta, use_validity)
 
     # ------------------------------------------------------------------ downward (Eq. 7)
     @ti.func
-    def _down(self, relay: ti.template(), margin: ti.template(), parent_relay: ti.template(),
-              parent_offs: ti.template(), parent_margin: ti.template()):
-        H, W = self.H, self.W
-        for y, x in ti.ndrange((-margin, H + margin), (-margin, W + margin)):
-            inside = 0 <= y < H and 0 <= x < W
-            a = 0.0
-            b = 0.0
-            if inside:
-                a = relay[y, x, 0]
-                b = relay[y, x, 1]
-            for jy, jx in ti.static(ti.ndrange(len(parent_offs), len(parent_offs))):
-                py = y - parent_offs[jy]
-                px = x - parent_offs[jx]
-                if -parent_margin <= py < H + parent_margin and \
-                        -parent_margin <= px < W + parent_margin:
-                    a += parent_relay[py, px, 0]
-                    b += parent_relay[py, px, 1]
-            relay[y, x, 0] = a
-            relay[y, x, 1] = b
+    def _parent_block(self, plane: ti.template(), y, b, span: ti.template()):
+        """Block ``b`` of row ``y`` of a parent's lane plane; zeros outside its columns."""
+        L = ti.static(self.lanes)
+        value = ti.Vector.zero(ti.f32, L)
+        if -ti.static(span[0] // L) <= b < ti.static(span[1] // L):
+            value = plane[y, b]
+        return value
 
     @ti.func
-    def _to_pixels(self, relay: ti.template(), offs: ti.template()):
-        for y, x in self.precision:
-            a = 0.0
-            b = 0.0
+    def _parent_shifted(self, plane: ti.template(), y, b, o: ti.template(),
+                        span: ti.template()):
+        """:meth:`_shifted` for a parent's plane, whose columns end before its child's:
+        blocks outside them read as zeros (no patch there relays anything)."""
+        L = ti.static(self.lanes)
+        q = ti.static(o // L)
+        r = ti.static(o % L)
+        value = self._parent_block(plane, y, b + q, span)
+        if ti.static(r != 0):
+            value = self._merge_lanes(value, self._parent_block(plane, y, b + q + 1, span), r)
+        return value
+
+    @ti.func
+    def _down(self, relay_a: ti.template(), relay_b: ti.template(), parent_a: ti.template(),
+              parent_b: ti.template(), parent_offs: ti.template(),
+              parent_margin: ti.template(), parent_span: ti.template()):
+        """A level's relays += its parents', a block of patch centres at a time; its own
+        messages count only at in-image centres (the rest of the plane holds last
+        iteration's relays)."""
+        H, W = self.H, self.W
+        L = ti.static(self.lanes)
+        for y, b in relay_a:
+            a = ti.Vector.zero(ti.f32, L)
+            c = ti.Vector.zero(ti.f32, L)
+            if 0 <= y < H:
+                own_a = relay_a[y, b]
+                own_b = relay_b[y, b]
+                for l in ti.static(range(L)):
+                    if 0 <= b * L + l < W:
+                        a[l] = own_a[l]
+                        c[l] = own_b[l]
+            for jy in ti.static(range(len(parent_offs))):
+                py = y - parent_offs[jy]
+                if -parent_margin <= py < H + parent_margin:
+                    for jx in ti.static(range(len(parent_offs))):
+                        a += self._parent_shifted(parent_a, py, b, -parent_offs[jx],
+                                                  parent_span)
+                        c += self._parent_shifted(parent_b, py, b, -parent_offs[jx],
+                                                  parent_span)
+            relay_a[y, b] = a
+            relay_b[y, b] = c
+
+    @ti.func
+    def _to_pixels(self, relay_a: ti.template(), relay_b: ti.template(),
+                   offs: ti.template()):
+        L = ti.static(self.lanes)
+        for y, b in ti.ndrange(self.H, self.spans[-1][1] // L):
+            a = ti.Vector.zero(ti.f32, L)
+            c = ti.Vector.zero(ti.f32, L)
             for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
-                a += relay[y - offs[jy], x - offs[jx], 0]
-                b += relay[y - offs[jy], x - offs[jx], 1]
-            self.precision[y, x] = a
-            self.consensus_mean[y, x] = b / a if a > 0 else 0.0
+                a += self._shifted(relay_a, y - offs[jy], b, -offs[jx])
+                c += self._shifted(relay_b, y - offs[jy], b, -offs[jx])
+            for l in ti.static(range(L)):
+                x = b * L + l
+                if x < self.W:
+                    self.precision[y, x] = a[l]
+                    self.consensus_mean[y, x] = c[l] / a[l] if a[l] > 0 else 0.0
 
     @ti.kernel
     def downward(self):
         """Relay the messages down to the pixels: fills ``precision`` (1/sigma^2) and
         ``consensus_mean`` (d-bar; 0 where no valid patch contains the pixel).  One launch:
         the levels' loops run in order, from the top."""
-        # the top level has no margin: its relay is just its own messages
+        # the top level has no parent: its relay is just its own messages
         for i in ti.static(range(len(self.levels) - 2, -1, -1)):
-            self._down(self.relay[i], ti.static(self.levels[i].margin), self.relay[i + 1],
-                       ti.static(self.levels[i + 1].offsets),
-                       ti.static(self.levels[i + 1].margin))
-        self._to_pixels(self.relay[0], ti.static(self.levels[0].offsets))
+            self._down(self.relay_a[i], self.relay_b[i], self.relay_a[i + 1],
+                       self.relay_b[i + 1], ti.static(self.levels[i + 1].offsets),
+                       ti.static(self.levels[i + 1].margin), ti.static(self.spans[i + 1]))
+        self._to_pixels(self.relay_a[0], self.relay_b[0], ti.static(self.levels[0].offsets))
 
     # ------------------------------------------------------------------ inspection
     @ti.kernel
