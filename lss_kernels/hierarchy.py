@@ -60,6 +60,9 @@ def level_geometry(sizes):
     for lev_idx in range(len(levels) - 1, -1, -1):
         levels[lev_idx].margin = margin
         margin += max(abs(o) for o in levels[lev_idx].offsets)
+    # the pixels read level 1's centres around them (the consensus): a single level needs
+    # that margin too
+    levels[0].margin = max(levels[0].margin, max(abs(o) for o in levels[0].offsets))
     return levels
 
 
@@ -128,6 +131,7 @@ class PatchHierarchy:
         # loop index.  Columns -left .. right - 1 of :func:`column_spans`, rows as ``padded``
         self.lanes = lanes.lanes_for_arch()
         self.spans = column_spans(self.levels, W, self.lanes)
+        self.image_blocks = lanes.block_count(W, self.lanes)
 
         def lane_level(i):
             m, (left, right) = self.levels[i].margin, self.spans[i]
@@ -413,7 +417,7 @@ class PatchHierarchy:
         the patches one by one (a run-time loop over the lanes)."""
         C = self.C
         L = ti.static(self.lanes)
-        for y, blk in ti.ndrange(self.H, self.spans[-1][1] // L):
+        for y, blk in ti.ndrange(self.H, self.image_blocks):
             sums = d_sum[y, blk]
             most = phi_max[y, blk]
             least = phi_plus_min[y, blk]
@@ -573,7 +577,7 @@ class PatchHierarchy:
     def _to_pixels(self, relay_a: ti.template(), relay_b: ti.template(),
                    offs: ti.template()):
         L = ti.static(self.lanes)
-        for y, b in ti.ndrange(self.H, self.spans[-1][1] // L):
+        for y, b in ti.ndrange(self.H, self.image_blocks):
             a = ti.Vector.zero(ti.f32, L)
             c = ti.Vector.zero(ti.f32, L)
             for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):

@@ -116,3 +116,19 @@ def test_one_iteration_at_a_width_of_partial_lane_blocks(ti_arch):
     scale = max(1.0, np.abs(spec.theta).max())
     assert np.abs(kernel.theta - spec.theta).max() < 1e-3 * scale
     solver.close()
+
+
+def test_a_single_patch_level_matches_the_specification(ti_arch):
+    """With one level of patches the pixels' consensus reads that level's relays one patch
+    centre beyond the image on every side: the level keeps that margin (3 iterations:
+    the prior and validity enter from the second)."""
+    from lss_kernels.solver import Solver
+    params = PARAMS.replace(patch_sizes=(3,))
+    left, right, init = synthetic_pair(W, H, D_MAX, seed=1)
+    solver = Solver(left, right, D_MAX, init, params=params)
+    spec = npi.state_from_solver(solver)
+    for _ in range(3):
+        solver.step()
+        spec, _ = npi.iteration(spec, params)
+    _check(npi.state_from_solver(solver), spec)
+    solver.close()
