@@ -19,9 +19,11 @@ Frame: cyclopean, arrays ``(H, W)`` indexed ``[y, x]``; disparities are cyclopea
 disparity = 2 c); the cost volumes sample integer ``c = 1 .. c_max`` (volume index
 ``k = c - 1``).
 Patches are centred on in-image pixels only; pixels outside the image contribute nothing
-(sums are over in-image pixels and means divide by the in-image count).  Intermediate levels
+(sums are over in-image pixels and means divide by the in-image count).  Lower levels
 carry a margin of patch centres outside the image because a parent near the border has
-children centred there.
+children centred there, and level 1 at least one patch reach (the pixels' consensus reads
+it around them); the per-iteration relays are lane planes whose columns extend the margins
+to whole blocks (:func:`column_spans`).
 """
 import numpy as np
 import taichi as ti
@@ -74,7 +76,8 @@ def column_spans(levels, width, lanes_per_block):
     parent's children beyond the parent's columns, rounded out to whole blocks (with one
     pixel per block: exactly the levels' margins); level 1 also reaches the pixels' blocks
     and one reach of its own beyond them (the consensus reads it there).  Patch centres
-    beyond a level's margin only ever hold zero relays and out-of-image sums."""
+    beyond a level's margin only ever hold zero relays, and their sums and extremes are
+    never read."""
     L = int(lanes_per_block)
     round_up = lambda v: -(-v // L) * L
     spans = [None] * len(levels)
@@ -291,7 +294,8 @@ class PatchHierarchy:
                         phi_plus_min: ti.template(), offs: ti.template()):
         """Level 1 from the pixels, a block of patch centres at a time: each row of the
         patches reads its window of the three planes once (out-of-image pixels as the
-        neutral 0, -inf, +inf, so every patch sums and compares in the same order)."""
+        neutral 0, -1e30, +1e30, the old starting values: every patch sums and compares in the
+        same order)."""
         L = ti.static(self.lanes)
         lo = ti.static(offs[0])                 # the offsets ascend
         hi = ti.static(offs[len(offs) - 1])
@@ -413,9 +417,8 @@ class PatchHierarchy:
         C_p(c) + beta |c - m| (up to float rounding of near-ties).  The two candidates of
         :meth:`_side_argmins` are cached per patch and searched again only where
         (floor m, ceil m) moved since the last call, so an iteration mostly streams 2-D
-        fields.  A block of patch centres at a time: the relays in and out as whole blocks,
-        the patches one by one (a run-time loop over the lanes)."""
-        C = self.C
+        fields.  A block of patch centres at a time: the sums and extremes read and the relays
+        stored as whole blocks, the patches one by one (a run-time loop over the lanes)."""
         L = ti.static(self.lanes)
         for y, blk in ti.ndrange(self.H, self.image_blocks):
             sums = d_sum[y, blk]

@@ -118,17 +118,31 @@ def test_one_iteration_at_a_width_of_partial_lane_blocks(ti_arch):
     solver.close()
 
 
-def test_a_single_patch_level_matches_the_specification(ti_arch):
+@pytest.mark.parametrize("width", [56, 61])
+def test_a_single_patch_level_matches_the_specification(ti_arch, width):
     """With one level of patches the pixels' consensus reads that level's relays one patch
-    centre beyond the image on every side: the level keeps that margin (3 iterations:
-    the prior and validity enter from the second)."""
+    centre beyond the image on every side: the level keeps that margin.  Three iterations
+    (the prior and validity enter at the second, phi is re-initialised at the third); at 61
+    pixels the last block of lanes is partial.  That scene's initial phi is symmetric about
+    column 25, where dphi/dx is -0.0 and the occlusion ray cast's direction is a matter of
+    the sign of zero (kernel and specification differ there by 3 px of delta_theta), so phi
+    is compared only at 56; the consensus and Theta at both."""
     from lss_kernels.solver import Solver
     params = PARAMS.replace(patch_sizes=(3,))
-    left, right, init = synthetic_pair(W, H, D_MAX, seed=1)
+    left, right, init = synthetic_pair(width, 30 if width == 61 else H, D_MAX,
+                                       seed=2 if width == 61 else 1)
     solver = Solver(left, right, D_MAX, init, params=params)
     spec = npi.state_from_solver(solver)
     for _ in range(3):
         solver.step()
         spec, _ = npi.iteration(spec, params)
-    _check(npi.state_from_solver(solver), spec)
+    kernel = npi.state_from_solver(solver)
+    pk, pn = kernel.extra["precision"], spec.extra["precision"]
+    np.testing.assert_array_equal(pk > 0, pn > 0)
+    np.testing.assert_allclose(pk, pn, rtol=1e-5, atol=0)
+    assert np.abs(kernel.extra["consensus_mean"] - spec.extra["consensus_mean"]).max() < 1e-3
+    scale = max(1.0, np.abs(spec.theta).max())
+    assert np.abs(kernel.theta - spec.theta).max() < 3e-3 * scale
+    if width == 56:
+        _check(kernel, spec)
     solver.close()
