@@ -249,15 +249,29 @@ class PatchHierarchy:
 
     # ------------------------------------------------------------------ upward, per iteration
     @ti.func
-    def _shifted(self, plane: ti.template(), y, b, o: ti.template()):
+    def _shifted(self, plane: ti.template(), y, b, o: ti.template(), span: ti.template()):
         """Centres ``b L + o .. b L + o + L - 1`` of row ``y`` of a level's lane plane (``o``
-        a compile-time offset): one or two whole blocks, their lanes moved by ``o mod L``."""
+        a compile-time offset): one or two whole blocks, their lanes moved by ``o mod L``.
+        With a ``span`` (a parent's columns, which end before its child's; ``()``: none),
+        blocks outside it read as zeros: no patch there relays anything."""
         L = ti.static(self.lanes)
         q = ti.static(o // L)
         r = ti.static(o % L)
-        value = plane[y, b + q]
+        value = self._block(plane, y, b + q, span)
         if ti.static(r != 0):
-            value = self._merge_lanes(value, plane[y, b + q + 1], r)
+            value = self._merge_lanes(value, self._block(plane, y, b + q + 1, span), r)
+        return value
+
+    @ti.func
+    def _block(self, plane: ti.template(), y, b, span: ti.template()):
+        """Block ``b`` of row ``y``; with a ``span`` (not ``()``), zeros outside its
+        columns."""
+        L = ti.static(self.lanes)
+        value = ti.Vector.zero(ti.f32, L)
+        if ti.static(len(span) == 0):
+            value = plane[y, b]
+        elif -ti.static(span[0] // L) <= b < ti.static(span[1] // L):
+            value = plane[y, b]
         return value
 
     @ti.func
@@ -312,10 +326,9 @@ class PatchHierarchy:
                     wq = self._window(phi_plus, py, x0, lo, hi, 1e30)
                     for jx in ti.static(range(len(offs))):
                         k = ti.static(offs[jx] - lo)
-                        s += ti.Vector([wd[k + l] for l in ti.static(range(L))])
-                        most = ti.max(most, ti.Vector([wp[k + l] for l in ti.static(range(L))]))
-                        least = ti.min(least,
-                                       ti.Vector([wq[k + l] for l in ti.static(range(L))]))
+                        s += lanes.take(wd, k, L)
+                        most = ti.max(most, lanes.take(wp, k, L))
+                        least = ti.min(least, lanes.take(wq, k, L))
             d_sum[y, b] = s
             phi_max[y, b] = most
             phi_plus_min[y, b] = least
@@ -331,9 +344,9 @@ class PatchHierarchy:
             least = ti.Vector([1e30] * L)
             for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
                 cy = y + offs[jy]
-                s += self._shifted(src_sum, cy, b, offs[jx])
-                most = ti.max(most, self._shifted(src_max, cy, b, offs[jx]))
-                least = ti.min(least, self._shifted(src_min, cy, b, offs[jx]))
+                s += self._shifted(src_sum, cy, b, offs[jx], ())
+                most = ti.max(most, self._shifted(src_max, cy, b, offs[jx], ()))
+                least = ti.min(least, self._shifted(src_min, cy, b, offs[jx], ()))
             d_sum[y, b] = s
             phi_max[y, b] = most
             phi_plus_min[y, b] = least
@@ -525,28 +538,6 @@ class PatchHierarchy:
 
     # ------------------------------------------------------------------ downward (Eq. 7)
     @ti.func
-    def _parent_block(self, plane: ti.template(), y, b, span: ti.template()):
-        """Block ``b`` of row ``y`` of a parent's lane plane; zeros outside its columns."""
-        L = ti.static(self.lanes)
-        value = ti.Vector.zero(ti.f32, L)
-        if -ti.static(span[0] // L) <= b < ti.static(span[1] // L):
-            value = plane[y, b]
-        return value
-
-    @ti.func
-    def _parent_shifted(self, plane: ti.template(), y, b, o: ti.template(),
-                        span: ti.template()):
-        """:meth:`_shifted` for a parent's plane, whose columns end before its child's:
-        blocks outside them read as zeros (no patch there relays anything)."""
-        L = ti.static(self.lanes)
-        q = ti.static(o // L)
-        r = ti.static(o % L)
-        value = self._parent_block(plane, y, b + q, span)
-        if ti.static(r != 0):
-            value = self._merge_lanes(value, self._parent_block(plane, y, b + q + 1, span), r)
-        return value
-
-    @ti.func
     def _down(self, relay_a: ti.template(), relay_b: ti.template(), parent_a: ti.template(),
               parent_b: ti.template(), parent_offs: ti.template(),
               parent_margin: ti.template(), parent_span: ti.template()):
@@ -569,10 +560,8 @@ class PatchHierarchy:
                 py = y - parent_offs[jy]
                 if -parent_margin <= py < H + parent_margin:
                     for jx in ti.static(range(len(parent_offs))):
-                        a += self._parent_shifted(parent_a, py, b, -parent_offs[jx],
-                                                  parent_span)
-                        c += self._parent_shifted(parent_b, py, b, -parent_offs[jx],
-                                                  parent_span)
+                        a += self._shifted(parent_a, py, b, -parent_offs[jx], parent_span)
+                        c += self._shifted(parent_b, py, b, -parent_offs[jx], parent_span)
             relay_a[y, b] = a
             relay_b[y, b] = c
 
@@ -584,8 +573,8 @@ class PatchHierarchy:
             a = ti.Vector.zero(ti.f32, L)
             c = ti.Vector.zero(ti.f32, L)
             for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
-                a += self._shifted(relay_a, y - offs[jy], b, -offs[jx])
-                c += self._shifted(relay_b, y - offs[jy], b, -offs[jx])
+                a += self._shifted(relay_a, y - offs[jy], b, -offs[jx], ())
+                c += self._shifted(relay_b, y - offs[jy], b, -offs[jx], ())
             for l in ti.static(range(L)):
                 x = b * L + l
                 if x < self.W:

@@ -18,7 +18,8 @@ computed like the others (from reflected pixels) and never stored as pixels.
 import numpy as np
 import taichi as ti
 
-__all__ = ["lanes_for_arch", "block_count", "lane_plane", "block", "columns", "to_image"]
+__all__ = ["lanes_for_arch", "block_count", "lane_plane", "block", "columns", "take",
+           "to_image"]
 
 
 def lanes_for_arch() -> int:
@@ -57,6 +58,13 @@ def block(f: ti.template(), y, b, lanes: ti.template()):
 def columns(b, lanes: ti.template()):
     """The x coordinates of block ``b``'s pixels, as a float vector."""
     return ti.Vector([ti.cast(b * lanes + lane, ti.f32) for lane in ti.static(range(lanes))])
+
+
+@ti.func
+def take(window, start: ti.template(), lanes: ti.template()):
+    """Entries ``start .. start + lanes - 1`` of a local vector (a block's window) as a
+    block: a block moved by a compile-time offset within the window it was read from."""
+    return ti.Vector([window[start + lane] for lane in ti.static(range(lanes))])
 
 
 def to_image(f, width, margin_rows=0):

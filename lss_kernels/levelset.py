@@ -321,8 +321,7 @@ class LevelSet:
     @ti.func
     def _shifted(self, window, i: ti.template()):
         """The block's pixels moved by ``i``, from its filter window."""
-        return ti.Vector([window[self.half + lane + i]
-                          for lane in ti.static(range(self.lanes))])
+        return lanes.take(window, ti.static(self.half + i), self.lanes)
 
     @ti.func
     def _column_filters(self, src: ti.template(), y, b, orders: ti.template()):

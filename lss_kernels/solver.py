@@ -367,7 +367,8 @@ class Solver:
                              f"level={level}, x={x}, y={y}")
         matching = h.patch_cost(level, y, x).astype(np.float64)
         c = np.arange(1, self.c_max + 1, dtype=np.float64)
-        d_mean = h.level_image(h.d_sum, level)[y, x] / max(h.count[level][y, x], 1)
+        d_sum = h.d_sum[level][y, x // h.lanes][x % h.lanes]
+        d_mean = d_sum / max(h.count[level][y, x], 1)
         beta = self.params.beta / self.c_max if self.iteration > 1 else 0.0
         cost = matching + beta * np.abs(c - d_mean)
         return dict(d=2 * c, cost=cost, matching_cost=matching, d_p=2.0 * h.d_p[level][y, x],
