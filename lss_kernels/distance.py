@@ -19,24 +19,26 @@ class DistanceTransform:
 
     ``run(f)`` expects ``f = 0`` at features and ``INF`` elsewhere and overwrites it with the
     squared distance (in voxel units, all axes weighted 1) to the nearest feature.  Lines are
-    processed in batches so that the scratch memory stays at ``batch`` lines.
+    processed in batches so that each of the three scratch buffers stays within
+    ``max_scratch`` elements (a line of length n takes n + 1).
     """
 
     def __init__(self, shape, max_scratch: int = 1 << 22):
         self.shape = tuple(int(s) for s in shape)
-        longest = max(self.shape)
         total = self.shape[0] * self.shape[1] * self.shape[2]
-        # the most lines of any processed axis (an axis of length 1 is skipped)
-        lines = max([total // n for n in self.shape if n > 1] or [1])
-        self.batch = max(1, min(lines, max_scratch // longest))
+        axes = [n for n in self.shape if n > 1] or [1]
+        # a line of length n takes n + 1 elements of each buffer (z has the extra one); a pass
+        # takes as many lines as fit, so a short axis runs in few launches, not one launch per
+        # ``max_scratch / longest`` lines (the c axis of B_occ: 380 launches -> 13 at 760x340)
+        need = max((total // n) * (n + 1) for n in axes)
+        self.size = max(min(int(max_scratch), need), max(axes) + 1)
         self.v = ti.field(ti.i32)
         self.z = ti.field(ti.f32)
         self.g = ti.field(ti.f32)
         builder = ti.FieldsBuilder()
-        builder.dense(ti.ij, (self.batch, longest)).place(self.v, self.g)
-        builder.dense(ti.ij, (self.batch, longest + 1)).place(self.z)
+        builder.dense(ti.i, self.size).place(self.v, self.g, self.z)
         self._tree = builder.finalize()
-        self.nbytes = 4 * self.batch * (2 * longest + longest + 1)
+        self.nbytes = 4 * 3 * self.size
 
     def destroy(self) -> None:
         """Free the scratch memory (the object cannot be used afterwards)."""
@@ -61,40 +63,44 @@ class DistanceTransform:
         n = ti.static(self.shape[axis])
         for t in range(count):
             line = start + t
+            o = t * (n + 1)                   # this line's stretch of the buffers
             for i in range(n):
                 a, b, c = self._index(axis, line, i)
-                self.g[t, i] = f[a, b, c]
+                self.g[o + i] = f[a, b, c]
             # lower envelope of the parabolas rooted at (q, g[q]); z[0] = -INF is a sentinel
             # that no intersection reaches, since |g| <= INF keeps |s| < INF / 2 + n
             k = 0
-            self.v[t, 0] = 0
-            self.z[t, 0] = -INF
-            self.z[t, 1] = INF
+            self.v[o] = 0
+            self.z[o] = -INF
+            self.z[o + 1] = INF
             for q in range(1, n):
-                fq = self.g[t, q] + ti.cast(q * q, ti.f32)
-                p = self.v[t, k]
-                s = (fq - (self.g[t, p] + ti.cast(p * p, ti.f32))) / ti.cast(2 * (q - p), ti.f32)
-                while s <= self.z[t, k]:
+                fq = self.g[o + q] + ti.cast(q * q, ti.f32)
+                p = self.v[o + k]
+                s = (fq - (self.g[o + p] + ti.cast(p * p, ti.f32))) / ti.cast(2 * (q - p), ti.f32)
+                while s <= self.z[o + k]:
                     k -= 1
-                    p = self.v[t, k]
-                    s = (fq - (self.g[t, p] + ti.cast(p * p, ti.f32))) / ti.cast(2 * (q - p), ti.f32)
+                    p = self.v[o + k]
+                    s = (fq - (self.g[o + p] + ti.cast(p * p, ti.f32))) / ti.cast(2 * (q - p),
+                                                                                 ti.f32)
                 k += 1
-                self.v[t, k] = q
-                self.z[t, k] = s
-                self.z[t, k + 1] = INF
+                self.v[o + k] = q
+                self.z[o + k] = s
+                self.z[o + k + 1] = INF
             k = 0
             for q in range(n):
-                while self.z[t, k + 1] < ti.cast(q, ti.f32):
+                while self.z[o + k + 1] < ti.cast(q, ti.f32):
                     k += 1
-                p = self.v[t, k]
+                p = self.v[o + k]
                 a, b, c = self._index(axis, line, q)
-                f[a, b, c] = ti.min(ti.cast((q - p) * (q - p), ti.f32) + self.g[t, p], INF)
+                f[a, b, c] = ti.min(ti.cast((q - p) * (q - p), ti.f32) + self.g[o + p], INF)
 
     def run(self, f) -> None:
         n0, n1, n2 = self.shape
         for axis in range(3):
-            if self.shape[axis] == 1:
+            n = self.shape[axis]
+            if n == 1:
                 continue
-            lines = n0 * n1 * n2 // self.shape[axis]
-            for start in range(0, lines, self.batch):
-                self._pass(f, axis, start, min(self.batch, lines - start))
+            lines = n0 * n1 * n2 // n
+            batch = max(1, self.size // (n + 1))
+            for start in range(0, lines, batch):
+                self._pass(f, axis, start, min(batch, lines - start))

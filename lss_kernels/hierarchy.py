@@ -209,17 +209,29 @@ class PatchHierarchy:
                 count[y, x] = n
 
     @ti.kernel
-    def _normalise(self, vol: ti.template()):
-        """Min-max normalise a level's volume to [0, 1] over its in-image patches."""
+    def _normalise(self, vol: ti.template(), cost_mean: ti.template()):
+        """Min-max normalise a level's volume to [0, 1] over its in-image patches, and store
+        mean_c C_p(c) of every in-image patch (the flat-cost baseline of sigma_p)."""
         self._lo[None] = 1e30
         self._hi[None] = -1e30
-        for y, x, k in ti.ndrange(self.H, self.W, self.C):
-            ti.atomic_min(self._lo[None], vol[y, x, k])
-            ti.atomic_max(self._hi[None], vol[y, x, k])
+        for y, x in cost_mean:
+            # a patch's extremes first: one atomic per patch, not one per candidate
+            lo = vol[y, x, 0]
+            hi = lo
+            for k in range(1, self.C):
+                lo = ti.min(lo, vol[y, x, k])
+                hi = ti.max(hi, vol[y, x, k])
+            ti.atomic_min(self._lo[None], lo)
+            ti.atomic_max(self._hi[None], hi)
         lo = self._lo[None]
         scale = 1.0 / ti.max(self._hi[None] - lo, 1e-12)
         for y, x, k in vol:
             vol[y, x, k] = (vol[y, x, k] - lo) * scale
+        for y, x in cost_mean:
+            total = 0.0
+            for k in range(self.C):
+                total += vol[y, x, k]
+            cost_mean[y, x] = total / self.C
 
     def build_costs(self, left, right):
         """Fill every level's C_p(c) (patch mean of M, min-max normalised per level).
@@ -234,18 +246,8 @@ class PatchHierarchy:
             self._cost_from_children(self.cost[i - 1], self.count[i - 1], self.cost[i],
                                      self.count[i], self.levels[i].offsets)
         for vol, mean in zip(self.cost, self.cost_mean):
-            self._normalise(vol)
-            self._mean_over_candidates(vol, mean)
+            self._normalise(vol, mean)
         self._cached_beta = None
-
-    @ti.kernel
-    def _mean_over_candidates(self, cost: ti.template(), cost_mean: ti.template()):
-        """mean_c C_p(c) of every in-image patch (the flat-cost baseline of sigma_p)."""
-        for y, x in cost_mean:
-            total = 0.0
-            for k in range(self.C):
-                total += cost[y, x, k]
-            cost_mean[y, x] = total / self.C
 
     # ------------------------------------------------------------------ upward, per iteration
     @ti.func
