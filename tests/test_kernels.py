@@ -480,14 +480,21 @@ def test_median_network_selects_the_medians_of_a_tile_of_windows(k):
             assert medians[j] == np.median(block[:, j:j + k])
 
 
-@pytest.mark.parametrize("k, width", [(3, 9), (5, 11), (5, 12), (7, 1), (7, 2), (7, 13)])
-def test_median_filter_matches_numpy_for_odd_and_tiny_widths(ti_arch, k, width):
+@pytest.mark.parametrize("lanes", [8, 1])
+@pytest.mark.parametrize("k, height, width", [(3, 5, 9), (5, 13, 11), (5, 5, 12), (7, 13, 1),
+                                              (7, 5, 2), (7, 13, 13)])
+def test_median_filter_matches_numpy_for_odd_and_tiny_sizes(ti_arch, monkeypatch, lanes, k,
+                                                            height, width):
+    """Rows in blocks of 8 (the CPU's; 13 rows end in a partial block) and of 1 (the GPUs')."""
+    from lss_kernels import lanes as lanes_module
     from lss_kernels.levelset import LevelSet
+    monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
     pool = FieldPool()
-    ls = LevelSet(pool, 5, width, Params(median_size=k))
+    ls = LevelSet(pool, height, width, Params(median_size=k))
     pool.finalize()
+    assert ls.lanes == lanes
     rng = np.random.default_rng(k * 100 + width)
-    a = np.round(rng.standard_normal((5, width)) * 2).astype(np.float32)
+    a = np.round(rng.standard_normal((height, width)) * 2).astype(np.float32)
     ls.phi_next.from_numpy(a)
     ls.median(ls.phi_next, ls.phi)
     np.testing.assert_array_equal(ls.phi.to_numpy(), ref.median_filter(a, k))

@@ -120,10 +120,15 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     # whose rows are padded to whole blocks of lanes
     half, padded = solver.levelset.half, solver.levelset.blocks * solver.levelset.lanes
     filter_margins = 3 * 2 * half * padded * 4 + 7 * H * (padded - W) * 4
-    # the median's sorted columns are stored in blocks of a tile's width, with a margin
-    # block of reflected columns on either side
-    k, tile = solver.params.median_size, solver.levelset._network[1]
-    filter_margins += k * H * (tile * (-(-W // tile) + 2) - W) * 4
+    # the median's sorted columns (k per pixel) and its output plane are stored in blocks
+    # of lanes rows, over whole tiles of columns; the sorted columns also hold k // 2
+    # reflected columns on either side
+    k, tile, ls = solver.params.median_size, solver.levelset._network[1], solver.levelset
+    rows = -(-H // ls.lanes) * ls.lanes
+    columns = tile * -(-W // tile)
+    planes += H * W * 4
+    filter_margins += (k * (rows * (columns + 2 * (k // 2)) - H * W)
+                       + rows * columns - H * W) * 4
     # set-up scratch kept for the solver's life: B_occ's block of rows (as many values as
     # CHUNK planes, rounded up to whole rows) and a 2-D distance map, and the distance
     # transforms' line buffers (3 arrays of lines x longest axis): phi's (all lines of the
