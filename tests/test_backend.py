@@ -1,4 +1,5 @@
-"""backend: the memoised source positions of Taichi's front end give Taichi's own text."""
+"""backend: the memoised source positions and source reading of Taichi's front end give
+Taichi's own text."""
 import ast
 import inspect
 import textwrap
@@ -38,6 +39,21 @@ def test_source_positions_match_taichi_for_every_node(ti_arch):
     multi = next(n for n in nodes if isinstance(n, ast.BinOp) and n.end_lineno > n.lineno)
     text = memoised(ctx, multi)
     assert f"line {multi.lineno + start - 1}" in text and text.count("^") >= 2
+
+
+def test_source_reading_matches_taichi(ti_arch):
+    from taichi.lang import kernel_impl
+    read = kernel_impl.getsourcelines
+    assert getattr(read, "_lss_memoised", False), "backend.init did not install the cache"
+    expected = read.original(_sample)
+    assert read(_sample) == expected and read(_sample) == expected   # built, then cached
+    assert expected[1] == inspect.getsourcelines(_sample)[1]
+    wrap = kernel_impl.textwrap
+    for line in expected[0] + ["\tx = 1  # a tab", "    y = 2\n"]:
+        assert wrap.fill(line, tabsize=4, width=9999) == textwrap.fill(line, tabsize=4,
+                                                                       width=9999)
+    assert wrap.dedent("".join(expected[0])) == textwrap.dedent("".join(expected[0]))
+    assert wrap.TextWrapper is textwrap.TextWrapper     # the rest of the module, unchanged
 
 
 @ti.func
