@@ -432,83 +432,87 @@ class PatchHierarchy:
         C_p(c) + beta |c - m| (up to float rounding of near-ties).  The two candidates of
         :meth:`_side_argmins` are cached per patch and searched again only where
         (floor m, ceil m) moved since the last call, so an iteration mostly streams 2-D
-        fields.  A block of patch centres at a time: the sums and extremes read and the relays
-        stored as whole blocks, the patches one by one (a run-time loop over the lanes)."""
+        fields.  A block of patch centres at a time: first patch by patch (a run-time loop
+        over the lanes) the validity, the prior mean and the cached candidates, searched
+        again where they moved; then Eq. 5 and the relays for the whole block in SIMD lanes,
+        the relays stored as whole blocks."""
         L = ti.static(self.lanes)
+        C = ti.static(self.C)
+        cf = ti.cast(C, ti.f32)
         for y, blk in ti.ndrange(self.H, self.image_blocks):
             sums = d_sum[y, blk]
             most = phi_max[y, blk]
             least = phi_plus_min[y, blk]
-            out_a = ti.Vector.zero(ti.f32, L)
-            out_b = ti.Vector.zero(ti.f32, L)
+            m = ti.Vector.zero(ti.f32, L)
+            lo = ti.Vector.zero(ti.i32, L)
+            use = ti.Vector.zero(ti.i32, L)       # in the image and valid
+            arg = ti.Vector.zero(ti.i32, L * 2)   # the candidates below and above m ...
+            at = ti.Vector.zero(ti.f32, L * 2)    # ... their costs
+            refined = ti.Vector.zero(ti.f32, L * 2)
+            mean = ti.Vector.zero(ti.f32, L)
             for lane in range(L):
                 x = blk * L + lane
                 if x < self.W:
-                    a, b = self._message(cost, cost_mean, env_key, env_arg, env_cost,
-                                         env_refined, count, d_p, sigma_p, valid, y, x,
-                                         sums[lane], most[lane], least[lane], beta,
-                                         use_validity)
-                    out_a[lane] = a
-                    out_b[lane] = b
-            relay_a[y, blk] = out_a
-            relay_b[y, blk] = out_b
-
-    @ti.func
-    def _message(self, cost: ti.template(), cost_mean: ti.template(), env_key: ti.template(),
-                 env_arg: ti.template(), env_cost: ti.template(), env_refined: ti.template(),
-                 count: ti.template(), d_p: ti.template(), sigma_p: ti.template(),
-                 valid: ti.template(), y, x, d_sum, phi_max, phi_plus_min, beta,
-                 use_validity):
-        """The patch at ``(y, x)`` of :meth:`_messages`, given its sum of D and extremes of
-        phi and phi(x + delta_theta); returns its relays (w / sigma^2, w d_p / sigma^2)."""
-        C = self.C
-        w = 1
-        if use_validity:
-            w = 1 if (phi_max > 0) != (phi_plus_min < 0) else 0                  # Eq. 4
-        valid[y, x] = w
-        a = 0.0
-        b = 0.0
-        if w == 1:
-            m = ti.min(ti.max(d_sum / ti.max(count[y, x], 1), 0.0),
-                       ti.cast(C, ti.f32))
-            lo = ti.cast(ti.floor(m), ti.i32)          # candidates c <= lo ...
-            hi = ti.max(ti.cast(ti.ceil(m), ti.i32), 1)  # ... and c >= hi
-            key = 2 * lo + 1 + ti.cast(hi == lo, ti.i32)
-            if env_key[y, x] != key:
-                c_lo, c_hi = self._side_argmins(cost, y, x, lo, hi, beta)
-                env_arg[y, x] = ti.Vector([c_lo, c_hi])
-                env_cost[y, x] = ti.Vector([cost[y, x, ti.max(c_lo, 1) - 1],
-                                            cost[y, x, ti.max(c_hi, 1) - 1]])
-                env_refined[y, x] = ti.Vector([self._refine(cost, y, x, ti.max(c_lo, 1)),
-                                               self._refine(cost, y, x, ti.max(c_hi, 1))])
-                env_key[y, x] = key
-            ca = env_arg[y, x]
-            cv = env_cost[y, x]
-            best = 1e30
-            arg = 1
-            refined = 1.0
-            if ca[0] >= 1:
-                best = cv[0] + beta * (m - ca[0])
-                arg = ca[0]
-                refined = env_refined[y, x][0]
-            if ca[1] >= 1:
-                v = cv[1] + beta * (ca[1] - m)
-                if v < best:
-                    best = v
-                    arg = ca[1]
-                    refined = env_refined[y, x][1]
+                    w = 1
+                    if use_validity:
+                        w = 1 if (most[lane] > 0) != (least[lane] < 0) else 0      # Eq. 4
+                    valid[y, x] = w
+                    if w == 1:
+                        mp = ti.min(ti.max(sums[lane] / ti.max(count[y, x], 1), 0.0), cf)
+                        lo_p = ti.cast(ti.floor(mp), ti.i32)          # candidates c <= lo
+                        hi_p = ti.max(ti.cast(ti.ceil(mp), ti.i32), 1)  # ... and c >= hi
+                        key = 2 * lo_p + 1 + ti.cast(hi_p == lo_p, ti.i32)
+                        if env_key[y, x] != key:
+                            self._search(cost, env_key, env_arg, env_cost, env_refined, y, x,
+                                         lo_p, hi_p, key, beta)
+                        ca = env_arg[y, x]
+                        cv = env_cost[y, x]
+                        cr = env_refined[y, x]
+                        for side in ti.static(range(2)):
+                            arg[side * L + lane] = ca[side]
+                            at[side * L + lane] = cv[side]
+                            refined[side * L + lane] = cr[side]
+                        m[lane] = mp
+                        lo[lane] = lo_p
+                        mean[lane] = cost_mean[y, x]
+                        use[lane] = 1
+            # Eq. 5 from the two candidates, for the whole block
+            arg_lo = lanes.take(arg, 0, L)
+            arg_hi = lanes.take(arg, L, L)
+            below = lanes.take(at, 0, L) + beta * (m - ti.cast(arg_lo, ti.f32))
+            above = lanes.take(at, L, L) + beta * (ti.cast(arg_hi, ti.f32) - m)
+            below = ti.select(arg_lo >= 1, below, 1e30)
+            above = ti.select(arg_hi >= 1, above, 1e30)
+            take_above = (arg_hi >= 1) & (above < below)
+            best = ti.select(take_above, above, below)
+            d = ti.select(take_above, lanes.take(refined, L, L),
+                          ti.select(arg_lo >= 1, lanes.take(refined, 0, L), 1.0))
             # mean over c of beta |c - m|, in closed form
             f = ti.cast(lo, ti.f32)
-            cf = ti.cast(C, ti.f32)
             l1 = f * m - 0.5 * f * (f + 1.0) + 0.5 * (cf * (cf + 1.0) - f * (f + 1.0)) \
                 - (cf - f) * m
-            spread = cost_mean[y, x] + beta * l1 / cf - best
-            sigma = cf / (spread + 1e-8)
-            d_p[y, x] = refined
-            sigma_p[y, x] = sigma
-            a = 1.0 / (sigma * sigma)
-            b = a * refined
-        return a, b
+            spread = mean + beta * l1 / cf - best
+            sigma = ti.select(use == 1, cf / (spread + 1e-8), 1.0)   # 1: no message
+            a = ti.select(use == 1, 1.0 / (sigma * sigma), 0.0)
+            relay_a[y, blk] = a
+            relay_b[y, blk] = a * d
+            for lane in ti.static(range(L)):
+                if use[lane] == 1:
+                    d_p[y, blk * L + lane] = d[lane]
+                    sigma_p[y, blk * L + lane] = sigma[lane]
+
+    @ti.func
+    def _search(self, cost: ti.template(), env_key: ti.template(), env_arg: ti.template(),
+                env_cost: ti.template(), env_refined: ti.template(), y, x, lo, hi, key, beta):
+        """The patch's two candidates of Eq. 5 (:meth:`_side_argmins`), their costs and
+        refined positions, searched again and cached under ``key``."""
+        c_lo, c_hi = self._side_argmins(cost, y, x, lo, hi, beta)
+        env_arg[y, x] = ti.Vector([c_lo, c_hi])
+        env_cost[y, x] = ti.Vector([cost[y, x, ti.max(c_lo, 1) - 1],
+                                    cost[y, x, ti.max(c_hi, 1) - 1]])
+        env_refined[y, x] = ti.Vector([self._refine(cost, y, x, ti.max(c_lo, 1)),
+                                       self._refine(cost, y, x, ti.max(c_hi, 1))])
+        env_key[y, x] = key
 
     def messages(self, beta, use_prior, use_validity):
         """Per-patch (d_p, sigma_p) and w_p at every level; seeds the downward relays.
