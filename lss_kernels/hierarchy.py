@@ -437,8 +437,7 @@ class PatchHierarchy:
         again where they moved; then Eq. 5 and the relays for the whole block in SIMD lanes,
         the relays stored as whole blocks."""
         L = ti.static(self.lanes)
-        C = ti.static(self.C)
-        cf = ti.cast(C, ti.f32)
+        cf = ti.cast(self.C, ti.f32)
         for y, blk in ti.ndrange(self.H, self.image_blocks):
             sums = d_sum[y, blk]
             most = phi_max[y, blk]
