@@ -144,19 +144,28 @@ class PatchHierarchy:
         self.d_sum = [lane_level(i) for i in range(len(self.levels))]
         self.phi_max = [lane_level(i) for i in range(len(self.levels))]
         self.phi_plus_min = [lane_level(i) for i in range(len(self.levels))]
-        # messages of the in-image patches
+        # messages of the in-image patches, stored only on request (``messages(keep=True)``:
+        # the tests and ``Solver.patch_curve``); an iteration passes them on as relays
         self.d_p = [pool.field(ti.f32, (H, W)) for _ in self.levels]
         self.sigma_p = [pool.field(ti.f32, (H, W)) for _ in self.levels]
         self.valid = [pool.field(ti.i32, (H, W)) for _ in self.levels]
-        # per patch, the mean of C_p over c (for sigma_p) and the two candidates of Eq. 5 for
-        # the current (floor(m), ceil(m)) of the prior mean m (``env_key``; 0 = none): they
-        # depend on m only through that pair, so a patch scans its cost curve again only
-        # where the pair moved (after the first few iterations, < 0.1 % of the patches)
-        self.cost_mean = [pool.field(ti.f32, (H, W)) for _ in self.levels]
-        self.env_key = [pool.field(ti.i32, (H, W)) for _ in self.levels]
-        self.env_arg = [pool.vector(2, ti.i32, (H, W)) for _ in self.levels]
-        self.env_cost = [pool.vector(2, ti.f32, (H, W)) for _ in self.levels]
-        self.env_refined = [pool.vector(2, ti.f32, (H, W)) for _ in self.levels]
+        # per in-image patch, lane planes of the two candidates of Eq. 5 (the argmins below
+        # and above the prior mean m, see :meth:`_side_argmins`) for the current
+        # (floor(m), ceil(m)), ``env_key`` (0 = none): they depend on m only through that
+        # pair, so a patch scans its cost curve again only where the pair moved (after the
+        # first few iterations, < 1 % of the patches).  Stored with beta and the mean over c
+        # folded in: ``env_below`` = C_p(c-) - beta c- - mean_c C_p, ``env_above`` =
+        # C_p(c+) + beta c+ - mean_c C_p (1e30 for an empty side), and their positions
+        # refined below the integer grid, ``env_d_below`` and ``env_d_above``
+        def lane_cache(dtype=ti.f32):
+            return [pool.vector(self.lanes, dtype, (H, self.image_blocks))
+                    for _ in self.levels]
+
+        self.env_key = lane_cache(ti.i32)
+        self.env_below = lane_cache()
+        self.env_above = lane_cache()
+        self.env_d_below = lane_cache()
+        self.env_d_above = lane_cache()
         self._cached_beta = None
         # downward relays of w / sigma^2 and w d / sigma^2
         self.relay_a = [lane_level(i) for i in range(len(self.levels))]
@@ -209,12 +218,11 @@ class PatchHierarchy:
                 count[y, x] = n
 
     @ti.kernel
-    def _normalise(self, vol: ti.template(), cost_mean: ti.template()):
-        """Min-max normalise a level's volume to [0, 1] over its in-image patches, and store
-        mean_c C_p(c) of every in-image patch (the flat-cost baseline of sigma_p)."""
+    def _normalise(self, vol: ti.template()):
+        """Min-max normalise a level's volume to [0, 1] over its in-image patches."""
         self._lo[None] = 1e30
         self._hi[None] = -1e30
-        for y, x in cost_mean:
+        for y, x in ti.ndrange(self.H, self.W):
             # a patch's extremes first: one atomic per patch, not one per candidate
             lo = vol[y, x, 0]
             hi = lo
@@ -227,11 +235,6 @@ class PatchHierarchy:
         scale = 1.0 / ti.max(self._hi[None] - lo, 1e-12)
         for y, x, k in vol:
             vol[y, x, k] = (vol[y, x, k] - lo) * scale
-        for y, x in cost_mean:
-            total = 0.0
-            for k in range(self.C):
-                total += vol[y, x, k]
-            cost_mean[y, x] = total / self.C
 
     def build_costs(self, left, right):
         """Fill every level's C_p(c) (patch mean of M, min-max normalised per level).
@@ -245,8 +248,8 @@ class PatchHierarchy:
         for i in range(1, len(self.levels)):
             self._cost_from_children(self.cost[i - 1], self.count[i - 1], self.cost[i],
                                      self.count[i], self.levels[i].offsets)
-        for vol, mean in zip(self.cost, self.cost_mean):
-            self._normalise(vol, mean)
+        for vol in self.cost:
+            self._normalise(vol)
         self._cached_beta = None
 
     # ------------------------------------------------------------------ upward, per iteration
@@ -421,106 +424,102 @@ class PatchHierarchy:
         return c_lo, c_hi
 
     @ti.func
-    def _messages(self, cost: ti.template(), cost_mean: ti.template(), env_key: ti.template(),
-                  env_arg: ti.template(), env_cost: ti.template(), env_refined: ti.template(),
-                  count: ti.template(), d_sum: ti.template(), phi_max: ti.template(),
-                  phi_plus_min: ti.template(), d_p: ti.template(), sigma_p: ti.template(),
-                  valid: ti.template(), relay_a: ti.template(), relay_b: ti.template(),
-                  beta: ti.f32,
-                  use_validity: ti.i32):
+    def _messages(self, size: ti.template(), cost: ti.template(), env_key: ti.template(),
+                  env_below: ti.template(), env_above: ti.template(),
+                  env_d_below: ti.template(), env_d_above: ti.template(),
+                  d_sum: ti.template(), phi_max: ti.template(), phi_plus_min: ti.template(),
+                  relay_a: ti.template(), relay_b: ti.template(), d_p: ti.template(),
+                  sigma_p: ti.template(), valid: ti.template(), beta: ti.f32,
+                  use_validity: ti.i32, keep: ti.template()):
         """Eq. 4 and Eq. 5 per patch: d_p and sigma_p of the full scan of
-        C_p(c) + beta |c - m| (up to float rounding of near-ties).  The two candidates of
-        :meth:`_side_argmins` are cached per patch and searched again only where
-        (floor m, ceil m) moved since the last call, so an iteration mostly streams 2-D
-        fields.  A block of patch centres at a time: first patch by patch (a run-time loop
-        over the lanes) the validity, the prior mean and the cached candidates, searched
-        again where they moved; then Eq. 5 and the relays for the whole block in SIMD lanes,
-        the relays stored as whole blocks."""
+        C_p(c) + beta |c - m| (up to float rounding of near-ties), from the two cached
+        candidates of :meth:`_side_argmins`; a patch whose (floor m, ceil m) moved since the
+        last call searches its curve again (:meth:`_search`).  A block of patch centres at a
+        time, in SIMD lanes: the relays are stored as whole blocks, d_p, sigma_p and the
+        validity only if ``keep``."""
         L = ti.static(self.lanes)
+        s = ti.static(size)                  # the patch side
+        h = ti.static(size // 2)
         cf = ti.cast(self.C, ti.f32)
         for y, blk in ti.ndrange(self.H, self.image_blocks):
-            sums = d_sum[y, blk]
-            most = phi_max[y, blk]
-            least = phi_plus_min[y, blk]
-            m = ti.Vector.zero(ti.f32, L)
-            lo = ti.Vector.zero(ti.i32, L)
-            use = ti.Vector.zero(ti.i32, L)       # in the image and valid
-            arg = ti.Vector.zero(ti.i32, L * 2)   # the candidates below and above m ...
-            at = ti.Vector.zero(ti.f32, L * 2)    # ... their costs
-            refined = ti.Vector.zero(ti.f32, L * 2)
-            mean = ti.Vector.zero(ti.f32, L)
-            for lane in range(L):
-                x = blk * L + lane
-                if x < self.W:
-                    w = 1
-                    if use_validity:
-                        w = 1 if (most[lane] > 0) != (least[lane] < 0) else 0      # Eq. 4
-                    valid[y, x] = w
-                    if w == 1:
-                        mp = ti.min(ti.max(sums[lane] / ti.max(count[y, x], 1), 0.0), cf)
-                        lo_p = ti.cast(ti.floor(mp), ti.i32)          # candidates c <= lo
-                        hi_p = ti.max(ti.cast(ti.ceil(mp), ti.i32), 1)  # ... and c >= hi
-                        key = 2 * lo_p + 1 + ti.cast(hi_p == lo_p, ti.i32)
-                        if env_key[y, x] != key:
-                            self._search(cost, env_key, env_arg, env_cost, env_refined, y, x,
-                                         lo_p, hi_p, key, beta)
-                        ca = env_arg[y, x]
-                        cv = env_cost[y, x]
-                        cr = env_refined[y, x]
-                        for side in ti.static(range(2)):
-                            arg[side * L + lane] = ca[side]
-                            at[side * L + lane] = cv[side]
-                            refined[side * L + lane] = cr[side]
-                        m[lane] = mp
-                        lo[lane] = lo_p
-                        mean[lane] = cost_mean[y, x]
-                        use[lane] = 1
-            # Eq. 5 from the two candidates, for the whole block
-            arg_lo = lanes.take(arg, 0, L)
-            arg_hi = lanes.take(arg, L, L)
-            below = lanes.take(at, 0, L) + beta * (m - ti.cast(arg_lo, ti.f32))
-            above = lanes.take(at, L, L) + beta * (ti.cast(arg_hi, ti.f32) - m)
-            below = ti.select(arg_lo >= 1, below, 1e30)
-            above = ti.select(arg_hi >= 1, above, 1e30)
-            take_above = (arg_hi >= 1) & (above < below)
-            best = ti.select(take_above, above, below)
-            d = ti.select(take_above, lanes.take(refined, L, L),
-                          ti.select(arg_lo >= 1, lanes.take(refined, 0, L), 1.0))
+            x = ti.Vector([blk * L + lane for lane in ti.static(range(L))])
+            w = ti.cast(x < self.W, ti.i32)          # in the image and valid
+            if use_validity:
+                w &= ti.cast((phi_max[y, blk] > 0) != (phi_plus_min[y, blk] < 0),
+                             ti.i32)                  # Eq. 4
+            # the prior mean m: the patch's in-image pixel count is its clipped square
+            rows = ti.min(y - h + s - 1, self.H - 1) - ti.max(y - h, 0) + 1
+            cols = ti.min(x - h + s - 1, self.W - 1) - ti.max(x - h, 0) + 1
+            m = ti.min(ti.max(d_sum[y, blk] / ti.max(rows * cols, 1), 0.0), cf)
+            lo = ti.cast(ti.floor(m), ti.i32)            # candidates c <= lo ...
+            hi = ti.max(ti.cast(ti.ceil(m), ti.i32), 1)  # ... and c >= hi
+            key = 2 * lo + 1 + ti.cast(hi == lo, ti.i32)
+            moved = w & ti.cast(env_key[y, blk] != key, ti.i32)
+            if moved.sum() > 0:
+                for lane in range(L):
+                    if moved[lane]:
+                        self._search(cost, env_key, env_below, env_above, env_d_below,
+                                     env_d_above, y, blk, lane, x[lane], lo[lane], hi[lane],
+                                     key[lane], beta)
+            # Eq. 5 from the two candidates: min over c of C_p(c) + beta |c - m|, less the
+            # mean over c of C_p
+            below = env_below[y, blk] + beta * m
+            above = env_above[y, blk] - beta * m
+            take_above = above < below
+            best = ti.min(below, above)
+            d = ti.select(take_above, env_d_above[y, blk], env_d_below[y, blk])
             # mean over c of beta |c - m|, in closed form
             f = ti.cast(lo, ti.f32)
             l1 = f * m - 0.5 * f * (f + 1.0) + 0.5 * (cf * (cf + 1.0) - f * (f + 1.0)) \
                 - (cf - f) * m
-            spread = mean + beta * l1 / cf - best
-            sigma = ti.select(use == 1, cf / (spread + 1e-8), 1.0)   # 1: no message
-            a = ti.select(use == 1, 1.0 / (sigma * sigma), 0.0)
+            spread = beta * l1 / cf - best
+            sigma = ti.select(w == 1, cf / (spread + 1e-8), 1.0)   # 1: no message
+            a = ti.select(w == 1, 1.0 / (sigma * sigma), 0.0)
             relay_a[y, blk] = a
             relay_b[y, blk] = a * d
-            for lane in ti.static(range(L)):
-                if use[lane] == 1:
-                    d_p[y, blk * L + lane] = d[lane]
-                    sigma_p[y, blk * L + lane] = sigma[lane]
+            if ti.static(keep):
+                for lane in ti.static(range(L)):
+                    if x[lane] < self.W:
+                        valid[y, x[lane]] = w[lane]
+                        if w[lane] == 1:
+                            d_p[y, x[lane]] = d[lane]
+                            sigma_p[y, x[lane]] = sigma[lane]
 
     @ti.func
-    def _search(self, cost: ti.template(), env_key: ti.template(), env_arg: ti.template(),
-                env_cost: ti.template(), env_refined: ti.template(), y, x, lo, hi, key, beta):
-        """The patch's two candidates of Eq. 5 (:meth:`_side_argmins`), their costs and
-        refined positions, searched again and cached under ``key``."""
+    def _search(self, cost: ti.template(), env_key: ti.template(), env_below: ti.template(),
+                env_above: ti.template(), env_d_below: ti.template(),
+                env_d_above: ti.template(), y, blk, lane, x, lo, hi, key, beta):
+        """Patch ``(y, x)``'s two candidates of Eq. 5 (:meth:`_side_argmins`), searched again
+        and cached in lane ``lane`` of block ``blk`` under ``key``."""
         c_lo, c_hi = self._side_argmins(cost, y, x, lo, hi, beta)
-        env_arg[y, x] = ti.Vector([c_lo, c_hi])
-        env_cost[y, x] = ti.Vector([cost[y, x, ti.max(c_lo, 1) - 1],
-                                    cost[y, x, ti.max(c_hi, 1) - 1]])
-        env_refined[y, x] = ti.Vector([self._refine(cost, y, x, ti.max(c_lo, 1)),
-                                       self._refine(cost, y, x, ti.max(c_hi, 1))])
-        env_key[y, x] = key
+        total = 0.0
+        for k in range(self.C):
+            total += cost[y, x, k]
+        mean = total / self.C
+        below, d_below = 1e30, 1.0
+        if c_lo >= 1:
+            below = cost[y, x, c_lo - 1] - beta * c_lo - mean
+            d_below = self._refine(cost, y, x, c_lo)
+        above, d_above = 1e30, 1.0
+        if c_hi >= 1:
+            above = cost[y, x, c_hi - 1] + beta * c_hi - mean
+            d_above = self._refine(cost, y, x, c_hi)
+        env_below[y, blk][lane] = below
+        env_above[y, blk][lane] = above
+        env_d_below[y, blk][lane] = d_below
+        env_d_above[y, blk][lane] = d_above
+        env_key[y, blk][lane] = key
 
-    def messages(self, beta, use_prior, use_validity):
+    def messages(self, beta, use_prior, use_validity, keep=False):
         """Per-patch (d_p, sigma_p) and w_p at every level; seeds the downward relays.
 
         A patch scans its cost curve (O(c_max)) only when floor or ceil of its prior mean
         moved, or the prior weight changed; otherwise its message is O(1) from the cached
         candidates.  Validity from Eq. 4 if ``use_validity``.  Without the prior (the first
         iteration) the weight is 0: the two candidates then cover every c, so d_p is the
-        plain argmin and every patch is valid."""
+        plain argmin and every patch is valid.  ``keep``: also store ``d_p``, ``sigma_p``
+        and ``valid`` (same inputs give the same messages: a second call after an
+        iteration's reproduces them)."""
         beta = float(beta) if use_prior else 0.0
         if not use_prior and use_validity:
             raise ValueError("messages: validity needs the prior (iteration >= 2)")
@@ -528,18 +527,18 @@ class PatchHierarchy:
             for key in self.env_key:
                 key.fill(0)
             self._cached_beta = beta
-        self._all_messages(beta, int(use_validity))
+        self._all_messages(beta, int(use_validity), bool(keep))
 
     @ti.kernel
-    def _all_messages(self, beta: ti.f32, use_validity: ti.i32):
+    def _all_messages(self, beta: ti.f32, use_validity: ti.i32, keep: ti.template()):
         """:meth:`_messages` of every level, in one launch."""
         for i in ti.static(range(len(self.levels))):
-            self._messages(self.cost[i], self.cost_mean[i], self.env_key[i], self.env_arg[i],
-                           self.env_cost[i], self.env_refined[i], self.count[i],
-                           self.d_sum[i], self.phi_max[i], self.phi_plus_min[i],
-                           self.d_p[i], self.sigma_p[i], self.valid[i], self.relay_a[i],
-                           self.relay_b[i],
-                           beta, use_validity)
+            self._messages(ti.static(self.levels[i].size), self.cost[i], self.env_key[i],
+                           self.env_below[i], self.env_above[i], self.env_d_below[i],
+                           self.env_d_above[i], self.d_sum[i], self.phi_max[i],
+                           self.phi_plus_min[i], self.relay_a[i], self.relay_b[i],
+                           self.d_p[i], self.sigma_p[i], self.valid[i], beta, use_validity,
+                           keep)
 
     # ------------------------------------------------------------------ downward (Eq. 7)
     @ti.func

@@ -369,8 +369,12 @@ class Solver:
         c = np.arange(1, self.c_max + 1, dtype=np.float64)
         d_sum = h.d_sum[level][y, x // h.lanes][x % h.lanes]
         d_mean = d_sum / max(h.count[level][y, x], 1)
-        beta = self.params.beta / self.c_max if self.iteration > 1 else 0.0
+        prior = self.iteration > 1
+        beta = self.params.beta / self.c_max if prior else 0.0
         cost = matching + beta * np.abs(c - d_mean)
+        # the iteration passes messages on as relays only: the same inputs again give the
+        # last iteration's d_p, sigma_p and validity
+        h.messages(beta, prior, prior, keep=True)
         return dict(d=2 * c, cost=cost, matching_cost=matching, d_p=2.0 * h.d_p[level][y, x],
                     sigma_p=2.0 * h.sigma_p[level][y, x], valid=bool(h.valid[level][y, x]),
                     mean_D=2.0 * d_mean)

@@ -132,7 +132,7 @@ def test_hierarchy_in_one_pixel_blocks_matches_eight(pair, monkeypatch):
         out = {}
         for it in range(2):             # the second pass reuses the cached candidates
             h.upward(fD, fphi, fplus)
-            h.messages(0.4 / C, True, True)
+            h.messages(0.4 / C, True, True, keep=True)
             h.downward()
         for level in range(len(SIZES)):
             for name in ("d_sum", "phi_max", "phi_plus_min", "relay_a", "relay_b"):
@@ -163,7 +163,7 @@ def test_messages_validity_and_consensus_match_reference(hierarchy):
     pool, (fD, fphi, fplus) = _field([D, phi, phi_plus])
     hierarchy.upward(fD, fphi, fplus)
     beta = 0.4 / C
-    hierarchy.messages(beta, True, True)
+    hierarchy.messages(beta, True, True, keep=True)
     d_ps, sig_ps, valids = [], [], []
     for level, s in enumerate(SIZES):
         cost = _inside(hierarchy, hierarchy.cost[level], level).astype(np.float64)
@@ -204,7 +204,7 @@ def test_candidate_messages_match_scan_at_integer_and_extreme_means(hierarchy, d
     pool, (fD, fphi, fplus) = _field([D, ones, ones])   # fg and occluded everywhere: valid
     hierarchy.upward(fD, fphi, fplus)
     beta = 0.4 * 3 / C    # a strong prior, so that it moves many argmins
-    hierarchy.messages(beta, True, True)
+    hierarchy.messages(beta, True, True, keep=True)
     for level, s in enumerate(SIZES):
         assert hierarchy.valid[level].to_numpy().all()
         cost = _inside(hierarchy, hierarchy.cost[level], level).astype(np.float64)
@@ -232,7 +232,7 @@ def test_cached_candidates_follow_a_moving_prior_mean(hierarchy):
         for D in (D0, D1):
             pool, (fD, fphi, fplus) = _field([D, ones, ones])
             hierarchy.upward(fD, fphi, fplus)
-            hierarchy.messages(beta, True, True)
+            hierarchy.messages(beta, True, True, keep=True)
             for level, s in enumerate(SIZES):
                 cost = _inside(hierarchy, hierarchy.cost[level], level).astype(np.float64)
                 want, sigma = ref.patch_messages(cost, ref.box_mean(D.astype(np.float32), s),
@@ -250,9 +250,9 @@ def test_first_iteration_messages_ignore_prior_and_validity(hierarchy):
     pool, (fD, fphi, fplus) = _field([rng.random((H, W)) * C, -np.ones((H, W)),
                                       np.ones((H, W))])
     hierarchy.upward(fD, fphi, fplus)   # every patch would be invalid under Eq. 4
-    hierarchy.messages(10.0, False, False)
+    hierarchy.messages(10.0, False, False, keep=True)
     with pytest.raises(ValueError, match="validity needs the prior"):
-        hierarchy.messages(10.0, False, True)
+        hierarchy.messages(10.0, False, True, keep=True)
     for level in range(len(SIZES)):
         assert hierarchy.valid[level].to_numpy().all()
         cost = _inside(hierarchy, hierarchy.cost[level], level).astype(np.float64)
@@ -281,7 +281,7 @@ def test_cached_candidates_are_dropped_when_the_costs_change(pair):
         rf.from_numpy(pair[1])
         h.build_costs(lf, rf)
         h.upward(fD, fphi, fplus)
-        h.messages(beta, True, True)
+        h.messages(beta, True, True, keep=True)
         for level, s in enumerate(SIZES):
             cost = _inside(h, h.cost[level], level).astype(np.float64)
             want, _ = ref.patch_messages(cost, ref.box_mean(D.astype(np.float32), s), beta,
@@ -302,7 +302,7 @@ def test_integer_messages_without_subpixel_refinement(pair):
     lf.from_numpy(pair[0])
     rf.from_numpy(pair[1])
     h.build_costs(lf, rf)
-    h.messages(0.0, False, False)
+    h.messages(0.0, False, False, keep=True)
     for level in range(len(SIZES)):
         cost = _inside(h, h.cost[level], level)
         np.testing.assert_array_equal(h.d_p[level].to_numpy(), cost.argmin(2) + 1)

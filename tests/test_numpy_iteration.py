@@ -46,11 +46,19 @@ def solver(ti_arch):
 
 
 def test_one_and_several_iterations_match_the_kernels(solver):
+    """Six kernel iterations (the first: no prior, every patch valid; then the prior,
+    validity and two re-initialisations), each against numpy's iteration from the kernels'
+    own state before it.  Each step is compared, not six chained ones: a pixel whose phi
+    ends a step at round-off level may take either sign in float32 and float64, and the next
+    signed-distance re-initialisation turns that into a pixel of distance for its
+    neighbours (phi_scale x 1 = 0.01 per pixel; 0.06 seen after six chained iterations when
+    a change of rounding order in the messages moved Theta's fit by 3e-4): the chain would
+    test round-off luck, not the iteration."""
     start = npi.state_from_solver(solver)
     assert start.phi.shape == (H, W) and start.c_max == 8
     assert [c.shape for c in start.costs] == [(H, W, 8)] * 3
 
-    # one iteration from the same state (the first: no prior, every patch valid)
+    # the first iteration, at the tighter tolerances of a single step from the set-up
     solver.step()
     after_one = npi.state_from_solver(solver)
     spec, seconds = npi.iteration(start, PARAMS)
@@ -58,14 +66,15 @@ def test_one_and_several_iterations_match_the_kernels(solver):
     _check(after_one, spec, theta_rtol=1e-3, phi_atol=2e-5)
     assert spec.extra["flipped"] == solver.history[-1]["flipped"]
 
-    # five more, numpy running on its own state (prior, validity, two re-initialisations)
+    # five more (prior, validity, re-initialisations at 3 and 6), each from the kernels' state
+    state = after_one
     for _ in range(5):
+        spec, _ = npi.iteration(state, PARAMS)
         solver.step()
-        spec, _ = npi.iteration(spec, PARAMS)
-    kernel = npi.state_from_solver(solver)
-    assert kernel.iteration == spec.iteration == 6
-    _check(kernel, spec)
-    np.testing.assert_allclose(kernel.D, spec.D, atol=5e-2)
+        state = npi.state_from_solver(solver)
+        _check(state, spec)
+        np.testing.assert_allclose(state.D, spec.D, atol=5e-2)
+    assert state.iteration == spec.iteration == 6
 
 
 def test_patch_sums_are_transposes():

@@ -112,14 +112,14 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     # the intermediate levels carry margins of patch centres outside the image
     m = [lev.margin for lev in solver.hierarchy.levels]
     margins = sum(4 * ((H + 2 * k) * (W + 2 * k) - H * W) * solver.c_max for k in m)
-    # 2-D fields: 64 for the model's maps, 8 per level for the message cache (mean cost,
-    # key, two candidates, their costs and refined positions), one per median window row
-    planes = (64 + 8 * levels + solver.params.median_size) * H * W * 4
+    # 2-D fields: 64 for the model's maps, 5 per level for the message cache (key, the two
+    # candidates' costs and refined positions), one per median window row
+    planes = (64 + 5 * levels + solver.params.median_size) * H * W * 4
     # the three row-filtered scratch planes of the separable filters carry half-width
-    # margin rows above and below; they and phi's four derivative planes are lane planes,
-    # whose rows are padded to whole blocks of lanes
+    # margin rows above and below; they, phi's four derivative planes and the message
+    # caches are lane planes, whose rows are padded to whole blocks of lanes
     half, padded = solver.levelset.half, solver.levelset.blocks * solver.levelset.lanes
-    filter_margins = 3 * 2 * half * padded * 4 + 7 * H * (padded - W) * 4
+    filter_margins = 3 * 2 * half * padded * 4 + (7 + 5 * levels) * H * (padded - W) * 4
     # the median's sorted columns (k per pixel) and its output plane are stored in blocks
     # of lanes rows, over whole tiles of columns; the sorted columns also hold k // 2
     # reflected columns on either side
