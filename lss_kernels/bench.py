@@ -35,8 +35,7 @@ import numpy as np
 __all__ = ["add_cli", "bandwidth", "fit_exponent", "main", "main_bench", "run_benchmark",
            "synthetic_pair"]
 
-STAGES = ("upward", "messages", "downward", "shapes", "occlusion", "boundary", "levelset",
-          "disparity")
+STAGES = ("upward", "messages", "downward", "shapes", "occlusion", "boundary", "levelset")
 
 #: Sweeps: ``sizes`` (W, H) at ``size_d`` disparities, ``disparities`` at ``disp_size``, and the
 #: Taichi-vs-numpy configuration ``compare`` (W, H, d_max), which also joins the thread sweep.

@@ -446,6 +446,15 @@ class LevelSet:
         b = (1.0 - tk) * cost[y, x1, k0] + tk * cost[y, x1, k1]
         return (1.0 - tx) * a + tx * b
 
+    @ti.func
+    def _cost_at_pixel(self, cost: ti.template(), y, x, c, C: ti.template()):
+        """:meth:`_cost_at` at an integer x (a pixel): linear in c only."""
+        kf = ti.min(ti.max(c - 1.0, 0.0), C - 1.0)
+        k0 = ti.min(ti.cast(ti.floor(kf), ti.i32), ti.max(C - 2, 0))
+        k1 = ti.min(k0 + 1, C - 1)
+        tk = kf - k0
+        return (1.0 - tk) * cost[y, x, k0] + tk * cost[y, x, k1]
+
     @ti.kernel
     def _step(self, cost: ti.template(), C: ti.template(), shapes: ti.template(),
               occ: ti.template(), dt: ti.f32, mu: ti.f32):
@@ -470,7 +479,7 @@ class LevelSet:
                 if x < self.W:
                     xf = xs[lane]
                     p = self.phi[y, x]
-                    m1 = self._cost_at(cost, y, xf, theta_1[lane], C)
+                    m1 = self._cost_at_pixel(cost, y, x, theta_1[lane], C)
                     m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x], theta_2[lane], C)
                     dirac = (1.0 / math.pi) / (1.0 + p * p)
                     self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt[lane])
@@ -541,9 +550,12 @@ class LevelSet:
             self.area[None] = 0
 
     @ti.func
-    def _store(self, dst: ti.template(), y, x, value, count: ti.template()):
+    def _store(self, dst: ti.template(), y, x, value, count: ti.template(),
+               disparity: ti.template()):
         """dst[y, x] = value; with ``count``, first tally the sign flip against dst's previous
-        value and the new foreground."""
+        value and the new foreground.  With ``disparity`` = ``(D, shapes, c_max)`` (not
+        ``()``), also Eq. 3's D = Theta_1 where value > 0, else Theta_2, clamped to
+        [0, c_max] (a quadratic can extrapolate outside the searched range)."""
         if ti.static(count):
             now = value > 0
             if now != (dst[y, x] > 0):
@@ -551,6 +563,11 @@ class LevelSet:
             if now:
                 self.area[None] += 1
         dst[y, x] = value
+        if ti.static(len(disparity) > 0):
+            D, shapes, c_max = ti.static(disparity)
+            j = 0 if value > 0 else 1
+            v = shapes.value(j, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+            D[y, x] = ti.min(ti.max(v, 0.0), ti.cast(c_max, ti.f32))
 
     @ti.func
     def _descend(self, yb, t, held, node: ti.template()):
@@ -599,9 +616,11 @@ class LevelSet:
                 self._descend(yb, t, kept, child)
 
     @ti.func
-    def _store_medians(self, dst: ti.template(), count: ti.template()):
-        """Stage 3: the medians into dst.  With ``count``, ``flipped`` and ``area`` count the
-        sign changes against dst's previous content and the pixels > 0."""
+    def _store_medians(self, dst: ti.template(), count: ti.template(),
+                       disparity: ti.template()):
+        """Stage 3: the medians into dst (and D, see :meth:`_store`).  With ``count``,
+        ``flipped`` and ``area`` count the sign changes against dst's previous content and
+        the pixels > 0."""
         self._start_count(count)
         for yb, x in self._medians:
             if x < self.W:
@@ -609,14 +628,15 @@ class LevelSet:
                 for lane in ti.static(range(self.lanes)):
                     y = yb * ti.static(self.lanes) + lane
                     if y < self.H:
-                        self._store(dst, y, x, medians[lane], count)
+                        self._store(dst, y, x, medians[lane], count, disparity)
 
     @ti.kernel
-    def _copy(self, src: ti.template(), dst: ti.template(), count: ti.template()):
-        """dst = src; with ``count``, tallied as in :meth:`_store`."""
+    def _copy(self, src: ti.template(), dst: ti.template(), count: ti.template(),
+              disparity: ti.template()):
+        """dst = src; with ``count`` and ``disparity``, as in :meth:`_store`."""
         self._start_count(count)
         for y, x in dst:
-            self._store(dst, y, x, src[y, x], count)
+            self._store(dst, y, x, src[y, x], count, disparity)
 
     @ti.kernel
     def _features(self, src: ti.template(), foreground: ti.i32):
@@ -644,21 +664,23 @@ class LevelSet:
             self.distance.run(self.distance_map)
             self._signed(phi, region, self.scale)
 
-    def median(self, src, dst, count=False):
+    def median(self, src, dst, count=False, disparity=()):
         """dst = the ``median_size``-square median of src (symmetric borders); with
         ``count``, also the sign flips against dst's previous content (``flipped``) and the
-        pixels > 0 (``area``)."""
+        pixels > 0 (``area``); with ``disparity`` = ``(D, shapes, c_max)``, also Eq. 3's D
+        of the new dst (see :meth:`_store`)."""
         if self.median_size == 1:
-            self._copy(src, dst, count)
+            self._copy(src, dst, count, disparity)
         else:
-            self._median(src, dst, count)
+            self._median(src, dst, count, disparity)
 
     @ti.kernel
-    def _median(self, src: ti.template(), dst: ti.template(), count: ti.template()):
+    def _median(self, src: ti.template(), dst: ti.template(), count: ti.template(),
+                disparity: ti.template()):
         """The stages of :meth:`median`, in one launch."""
         self._sort_columns(src)
         self._median_of_columns()
-        self._store_medians(dst, count)
+        self._store_medians(dst, count, disparity)
 
     @ti.kernel
     def net_change(self):
@@ -671,14 +693,16 @@ class LevelSet:
                 self.changed[None] += 1
             self.reference_sign[y, x] = now
 
-    def evolve(self, cost, c_max, shapes, occ, params, reinit):
+    def evolve(self, cost, c_max, shapes, occ, params, reinit, D=None):
         """One descent step of Eq. 2, then (every ``reinit_every``) the signed-distance
         re-initialisation and the median filter; counts the pixels whose sign flipped and the
-        foreground area."""
+        foreground area.  With ``D`` (an ``(H, W)`` field), also Eq. 3's disparity of the new
+        phi, written as phi is (no pass of its own)."""
         self._step(cost, c_max, shapes, occ, params.dt, params.mu)
         if reinit:
             self.reinitialise(self.phi_next)
-        self.median(self.phi_next, self.phi, count=True)
+        self.median(self.phi_next, self.phi, count=True,
+                    disparity=() if D is None else (D, shapes, c_max))
 
     @ti.kernel
     def _from_mask(self, mask: ti.types.ndarray()):
@@ -689,4 +713,4 @@ class LevelSet:
         """phi = phi_scale x signed distance of a boolean ``(H, W)`` mask."""
         self._from_mask(np.ascontiguousarray(mask, dtype=np.int32))
         self.reinitialise(self.phi_next)
-        self._copy(self.phi_next, self.phi, False)
+        self._copy(self.phi_next, self.phi, False, ())

@@ -29,9 +29,9 @@ The stages and their order are those of the solver (``solver.STAGES``):
     and its Gaussian-derivative gradient.
 ``levelset``
     The Eq. 2 step, then (every ``reinit_every`` iterations) the signed-distance
-    re-initialisation, then the ``median_size``-squared median filter with symmetric borders.
-``disparity``
-    D = Theta_1 where phi > 0, else Theta_2 (Eq. 3).
+    re-initialisation, then the ``median_size``-squared median filter with symmetric
+    borders, and D = Theta_1 where the new phi > 0, else Theta_2 (Eq. 3; the kernels write
+    it in the median's last pass).
 
 Frames and units are the solver's: cyclopean ``(H, W)`` arrays indexed ``[y, x]``, cyclopean
 disparities ``c = 1 .. c_max`` (volume index ``k = c - 1``); Theta over the normalised basis
@@ -58,8 +58,7 @@ from .reference import patch_messages
 
 __all__ = ["IterationState", "STAGES", "iteration", "run", "state_from_solver"]
 
-STAGES = ("upward", "messages", "downward", "shapes", "occlusion", "boundary", "levelset",
-          "disparity")
+STAGES = ("upward", "messages", "downward", "shapes", "occlusion", "boundary", "levelset")
 
 FIXED_POINT_STEPS = 6  # as occlusion.FIXED_POINT_STEPS
 
@@ -437,12 +436,9 @@ def iteration(state: IterationState, params, taps=None):
     phi_new = _median(phi_next, p.median_size)
     flipped = int(((phi_new > 0) != (phi > 0)).sum())
     area = int((phi_new > 0).sum())
-    now = time.perf_counter()
-    seconds["levelset"], t = now - t, now
-
-    # disparity: Eq. 3
+    # Eq. 3
     D = np.where(phi_new > 0, th1, _shape_value(theta[1], x, y, H, W))
-    seconds["disparity"] = time.perf_counter() - t
+    seconds["levelset"] = time.perf_counter() - t
 
     extra = dict(consensus_mean=mean, precision=precision, d_p=d_p, sigma_p=sigma_p,
                  valid=valid, phi_plus=phi_plus, updated=updated, flipped=flipped, area=area)

@@ -57,12 +57,11 @@ class OcclusionGeometry:
         return v
 
     @ti.kernel
-    def compute(self, shapes: ti.template(), phi: ti.template(), phi_x: ti.template(),
-                ray_cast: ti.i32):
-        """delta_theta and phi(x + delta_theta) for every pixel (``phi_x``: dphi/dx, a plane
-        or a lane plane).  The ray cast runs a block of pixels in SIMD lanes: the block steps
-        until every lane has reached its fixed point (a lane there repeats it), so each pixel
-        gets the value of its own fixed-point iteration."""
+    def compute(self, shapes: ti.template(), phi_x: ti.template(), ray_cast: ti.i32):
+        """delta_theta for every pixel (``phi_x``: dphi/dx, a plane or a lane plane).  The
+        ray cast runs a block of pixels in SIMD lanes: the block steps until every lane has
+        reached its fixed point (a lane there repeats it), so each pixel gets the value of
+        its own fixed-point iteration.  phi(x + delta_theta): :meth:`refresh_phi_plus`."""
         L = ti.static(self.lanes)
         for y, b in ti.ndrange(self.H, self.blocks):
             xf = lanes.columns(b, L)
@@ -87,7 +86,14 @@ class OcclusionGeometry:
                 x = b * L + lane
                 if x < self.W:
                     self.delta_theta[y, x] = dt[lane]
-                    self.phi_plus[y, x] = self.sample_row(phi, y, xf[lane] + dt[lane])
+
+    @ti.kernel
+    def refresh_phi_plus(self, phi: ti.template()):
+        """phi_plus = phi(x + delta_theta), the level set where the ray from (x, y) meets the
+        foreground's layer (Eq. 4's validity and the visible background read its sign)."""
+        for y, x in self.phi_plus:
+            self.phi_plus[y, x] = self.sample_row(phi, y, ti.cast(x, ti.f32) +
+                                                  self.delta_theta[y, x])
 
     @ti.func
     def _source(self, shapes: ti.template(), j, x, y, sign):

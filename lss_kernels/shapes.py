@@ -13,7 +13,7 @@ weighted rows, or a singular system, keeps its previous shape.
 import numpy as np
 import taichi as ti
 
-__all__ = ["GlobalShapes", "to_pixel_coefficients", "basis"]
+__all__ = ["GlobalShapes", "WeightPlanes", "to_pixel_coefficients", "basis"]
 
 NB = 6            # basis size
 NT = 21 + 6 + 1   # upper triangle of U U^T, U d, row count
@@ -78,8 +78,7 @@ class GlobalShapes:
         return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
 
     @ti.func
-    def _from_pixels(self, weight_fg: ti.template(), weight_bg: ti.template(),
-                     target: ti.template(), out: ti.template()):
+    def _from_pixels(self, weights: ti.template(), target: ti.template(), out: ti.template()):
         """The tiles' sums of the pixels' terms.  Every term is a monomial
         ``w x_n^p y_n^q`` (times d-bar for ``U d``), so a row of a tile first sums
         ``w x_n^p`` (p <= 4) and ``w d x_n^p`` (p <= 2) over its pixels, and the row's sums
@@ -96,8 +95,9 @@ class GlobalShapes:
                         if x < self.W:
                             xn = (ti.cast(x, ti.f32) - self.cx) * self.inv_s
                             d = target[y, x]
+                            w_j = weights.region_weights(y, x)
                             for j in ti.static(range(2)):
-                                w = weight_fg[y, x] if j == 0 else weight_bg[y, x]
+                                w = w_j[j]
                                 if w > 0:
                                     wp = w
                                     for q in ti.static(range(5)):
@@ -179,11 +179,13 @@ class GlobalShapes:
             self.updated[j] = ok
 
     @ti.kernel
-    def fit(self, weight_fg: ti.template(), weight_bg: ti.template(), target: ti.template()):
+    def fit(self, weights: ti.template(), target: ti.template()):
         """Weighted least squares of ``target`` (``(H, W)``, the consensus mean) over each
-        region, ``weight_*`` (``(H, W)``) being 0 outside it; updates ``theta``.  One
-        launch: the reduction's levels run in order."""
-        self._from_pixels(weight_fg, weight_bg, target, self.tiles[0])
+        region; updates ``theta``.  ``weights`` has a ``ti.func`` ``region_weights(y, x)``
+        giving pixel (y, x)'s row weights ``[w_fg, w_bg]`` (0 outside a region), computed
+        as the pixels are summed (no weight planes): the solver's Eq. 8 weights, or
+        :class:`WeightPlanes`.  One launch: the reduction's levels run in order."""
+        self._from_pixels(weights, target, self.tiles[0])
         for i in ti.static(range(1, len(self.tiles))):
             self._from_tiles(self.tiles[i - 1], self.tiles[i])
         self._solve_root(self.tiles[-1])
@@ -196,3 +198,17 @@ class GlobalShapes:
         """``(2, 6)`` coefficients over raw cyclopean pixel coordinates."""
         th = self.theta.to_numpy()
         return np.stack([to_pixel_coefficients(t, self.H, self.W, scale) for t in th])
+
+
+@ti.data_oriented
+class WeightPlanes:
+    """Row weights held in two ``(H, W)`` planes, ``weight_fg`` and ``weight_bg`` (0 outside
+    each region), as the ``weights`` of :meth:`GlobalShapes.fit`.  Each instance is its own
+    kernel template argument: build one per pair of planes and reuse it."""
+
+    def __init__(self, weight_fg, weight_bg):
+        self.weight_fg, self.weight_bg = weight_fg, weight_bg
+
+    @ti.func
+    def region_weights(self, y, x):
+        return ti.Vector([self.weight_fg[y, x], self.weight_bg[y, x]])

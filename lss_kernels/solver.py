@@ -3,16 +3,16 @@
 
 One iteration (as in the authors' release, with everything a data-parallel kernel):
 
-1. derivatives of phi (normal, curvature, sign of dphi/dx);
+1. derivatives of phi (normal, curvature, sign of dphi/dx) and phi(x + delta_theta);
 2. upward pass: patch means of D, patch extremes of phi and phi(x + delta_theta) -> w_p (Eq. 4);
 3. patch messages d_p, sigma_p (Eq. 5; no |c - D| prior and all patches valid at iteration 1);
 4. downward pass: the consensus (Eq. 7);
 5. Theta_1 over phi >= 0 and Theta_2 over the visible background, by the hierarchical
    normal-equation reduction (Eq. 8);
-6. delta_theta and the visible background for the new Theta (the ray cast of Sec. 2);
+6. delta_theta for the new Theta (the ray cast of Sec. 2);
 7. the Eq. 2 step of phi, then (every ``reinit_every``) signed-distance re-initialisation and
    the median filter;
-8. D = H(phi) Theta_1 + (1 - H(phi)) Theta_2 (Eq. 3).
+8. D = H(phi) Theta_1 + (1 - H(phi)) Theta_2 (Eq. 3), written by the median's last pass.
 
 The host reads two integers per iteration (flipped pixels and foreground area) for the stopping
 rule; nothing else leaves the device inside the loop.
@@ -66,8 +66,7 @@ class Result:
     history: list = field(default_factory=list)
 
 
-STAGES = ("upward", "messages", "downward", "shapes", "occlusion", "boundary", "levelset",
-          "disparity")
+STAGES = ("upward", "messages", "downward", "shapes", "occlusion", "boundary", "levelset")
 
 
 @ti.data_oriented
@@ -128,8 +127,6 @@ class Solver:
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, self.params)
         self.D = pool.field(ti.f32, (H, W))
-        self.weight_fg = pool.field(ti.f32, (H, W))
-        self.weight_bg = pool.field(ti.f32, (H, W))
         pool.finalize()
         self.levelset.setup()
         self.costs.setup(self.levelset.distance, self.levelset.distance_map)
@@ -213,34 +210,25 @@ class Solver:
         return float(np.median(mean[sel])) if sel.any() else 0.0
 
     # ------------------------------------------------------------------ small kernels
-    @ti.kernel
-    def _region_weights(self, power: ti.i32):
-        for y, x in self.D:
-            p = self.hierarchy.precision[y, x]
-            w = p if power == 1 else p * p
-            phi = self.levelset.phi[y, x]
-            # a consensus whose correspondence falls outside the other image (x - c < 0 or
-            # x + c > W - 1) is no evidence: its costs compare clamped border columns
-            c = self.hierarchy.consensus_mean[y, x]
-            xf = ti.cast(x, ti.f32)
-            if xf - c < 0.0 or xf + c > self.W - 1.0:
-                w = 0.0
-            self.weight_fg[y, x] = w if phi >= 0 else 0.0
-            self.weight_bg[y, x] = w if (phi < 0 and self.occ.phi_plus[y, x] < 0) else 0.0
-
-    @ti.kernel
-    def _refresh_phi_plus(self):
-        for y, x in self.D:
-            self.occ.phi_plus[y, x] = self.occ.sample_row(
-                self.levelset.phi, y, ti.cast(x, ti.f32) + self.occ.delta_theta[y, x])
-
-    @ti.kernel
-    def _update_D(self):
-        for y, x in self.D:
-            j = 0 if self.levelset.phi[y, x] > 0 else 1
-            v = self.shapes.value(j, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
-            # a quadratic can extrapolate outside the searched range: D stays inside it
-            self.D[y, x] = ti.min(ti.max(v, 0.0), ti.cast(self.c_max, ti.f32))
+    @ti.func
+    def region_weights(self, y, x):
+        """The rows of Eq. 8 at pixel (y, x), ``[w_fg, w_bg]``: the consensus precision
+        (1 / sigma^2, to the power ``shape_weight_power``) on the foreground (phi >= 0) and
+        on the visible background (phi < 0 and phi(x + delta_theta) < 0), 0 elsewhere.
+        Summed by ``GlobalShapes.fit`` as it reads the pixels."""
+        p = self.hierarchy.precision[y, x]
+        w = p
+        if ti.static(self.params.shape_weight_power != 1):
+            w = p * p
+        phi = self.levelset.phi[y, x]
+        # a consensus whose correspondence falls outside the other image (x - c < 0 or
+        # x + c > W - 1) is no evidence: its costs compare clamped border columns
+        c = self.hierarchy.consensus_mean[y, x]
+        xf = ti.cast(x, ti.f32)
+        if xf - c < 0.0 or xf + c > self.W - 1.0:
+            w = 0.0
+        return ti.Vector([w if phi >= 0 else 0.0,
+                          w if (phi < 0 and self.occ.phi_plus[y, x] < 0) else 0.0])
 
     # ------------------------------------------------------------------ the iteration
     def _stage(self, name, t):
@@ -263,7 +251,7 @@ class Solver:
         ls, hier = self.levelset, self.hierarchy
         t = t_iter
         ls.derivatives()
-        self._refresh_phi_plus()
+        self.occ.refresh_phi_plus(ls.phi)
         if not first:
             hier.upward(self.D, ls.phi, self.occ.phi_plus)
         t = self._stage("upward", t)
@@ -271,18 +259,16 @@ class Solver:
         t = self._stage("messages", t)
         hier.downward()
         t = self._stage("downward", t)
-        self._region_weights(p.shape_weight_power)
-        self.shapes.fit(self.weight_fg, self.weight_bg, hier.consensus_mean)
+        self.shapes.fit(self, hier.consensus_mean)
         t = self._stage("shapes", t)
-        self.occ.compute(self.shapes, ls.phi, ls.phi_x, 1)
+        self.occ.compute(self.shapes, ls.phi_x, 1)
         t = self._stage("occlusion", t)
         ls.boundary_weight(self.costs, self.shapes)
         t = self._stage("boundary", t)
         reinit = self.iteration % p.reinit_every == 0
-        ls.evolve(hier.cost[0], self.c_max, self.shapes, self.occ, p, reinit)
+        # the median's last pass also writes D (Eq. 3) from the new phi
+        ls.evolve(hier.cost[0], self.c_max, self.shapes, self.occ, p, reinit, self.D)
         t = self._stage("levelset", t)
-        self._update_D()
-        t = self._stage("disparity", t)
         flipped = int(ls.flipped[None])
         area = int(ls.area[None])
         seconds = time.perf_counter() - t_iter

@@ -310,7 +310,7 @@ def test_integer_messages_without_subpixel_refinement(pair):
 
 
 def test_normal_equation_reduction_matches_lstsq(ti_arch):
-    from lss_kernels.shapes import GlobalShapes, basis, to_pixel_coefficients
+    from lss_kernels.shapes import GlobalShapes, WeightPlanes, basis, to_pixel_coefficients
     rng = np.random.default_rng(7)
     h, w = 41, 57   # several tiles, ragged edges
     pool = FieldPool()
@@ -322,7 +322,7 @@ def test_normal_equation_reduction_matches_lstsq(ti_arch):
     target = rng.random((h, w)) * 30
     for f, a in zip(fields, (wf, wb, target)):
         f.from_numpy(a.astype(np.float32))
-    shapes.fit(*fields)
+    shapes.fit(WeightPlanes(fields[0], fields[1]), fields[2])
     y, x = np.mgrid[0:h, 0:w].astype(np.float64)
     for j, wgt in enumerate((wf, wb)):
         U = basis(x, y).reshape(-1, 6)
@@ -336,7 +336,7 @@ def test_normal_equation_reduction_matches_lstsq(ti_arch):
 
 
 def test_shape_keeps_previous_value_with_too_few_rows(ti_arch):
-    from lss_kernels.shapes import GlobalShapes
+    from lss_kernels.shapes import GlobalShapes, WeightPlanes
     pool = FieldPool()
     shapes = GlobalShapes(pool, 8, 8)
     wf, wb, t = (pool.field(ti.f32, (8, 8)) for _ in range(3))
@@ -347,7 +347,7 @@ def test_shape_keeps_previous_value_with_too_few_rows(ti_arch):
     wf.from_numpy(w)
     wb.from_numpy(np.ones((8, 8), np.float32))
     t.from_numpy(np.full((8, 8), 9.0, np.float32))
-    shapes.fit(wf, wb, t)
+    shapes.fit(WeightPlanes(wf, wb), t)
     th = shapes.theta.to_numpy()
     assert th[0, 5] == pytest.approx(5.0) and shapes.updated[0] == 0
     assert th[1, 5] == pytest.approx(9.0, abs=1e-3) and shapes.updated[1] == 1

@@ -13,13 +13,14 @@ X = np.broadcast_to(np.arange(W, dtype=np.float64), (H, W))
 @pytest.fixture(scope="module")
 def geometry(ti_arch):
     from lss_kernels.occlusion import OcclusionGeometry
-    from lss_kernels.shapes import GlobalShapes
+    from lss_kernels.shapes import GlobalShapes, WeightPlanes
     pool = FieldPool()
     occ = OcclusionGeometry(pool, H, W, C)
     shapes = GlobalShapes(pool, H, W)
     phi, phi_x, ones, zeros, target = (pool.field(ti.f32, (H, W)) for _ in range(5))
     pool.finalize()
     ones.from_numpy(np.ones((H, W), np.float32))
+    only = (WeightPlanes(ones, zeros), WeightPlanes(zeros, ones))   # Theta_1's rows, Theta_2's
 
     def setup(theta1, theta2, fg):
         """Theta_j as exact planes (fitted from their own values), phi = 0.01 x signed
@@ -27,14 +28,15 @@ def geometry(ti_arch):
         y, x = np.mgrid[0:H, 0:W].astype(np.float64)
         for j, th in enumerate((theta1, theta2)):
             target.from_numpy(th(x, y).astype(np.float32))
-            shapes.fit(ones if j == 0 else zeros, zeros if j == 0 else ones, target)
+            shapes.fit(only[j], target)
         cols = np.arange(W)
         edges = np.flatnonzero(np.diff(fg.astype(int))) + 0.5
         dist = np.min(np.abs(cols[:, None] - edges[None, :]), axis=1)
         p = 0.01 * np.where(fg, dist, -dist)
         phi.from_numpy(np.broadcast_to(p, (H, W)).astype(np.float32))
         phi_x.from_numpy(np.broadcast_to(np.gradient(p), (H, W)).astype(np.float32))
-        occ.compute(shapes, phi, phi_x, 1)
+        occ.compute(shapes, phi_x, 1)
+        occ.refresh_phi_plus(phi)
         occ.render_left(shapes, phi)
         return p
     yield occ, shapes, setup

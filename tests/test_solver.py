@@ -1,6 +1,7 @@
 """The whole solver on rendered two-layer scenes with exact ground truth."""
 import numpy as np
 import pytest
+import taichi as ti
 
 from lss_kernels import Params, Solver, solve
 from lss_kernels.metrics import score
@@ -153,15 +154,25 @@ def test_shape_weights_drop_consensus_that_points_outside_the_other_image(ti_arc
     prec = rng.uniform(0.5, 2.0, (H, W)).astype(np.float32)
     solver.hierarchy.consensus_mean.from_numpy(mean)
     solver.hierarchy.precision.from_numpy(prec)
-    solver._region_weights(2)
+    assert solver.params.shape_weight_power == 2
+    weight_fg, weight_bg = ti.field(ti.f32, (H, W)), ti.field(ti.f32, (H, W))
+
+    @ti.kernel
+    def evaluate(s: ti.template()):
+        for y, x in weight_fg:
+            w = s.region_weights(y, x)
+            weight_fg[y, x] = w[0]
+            weight_bg[y, x] = w[1]
+
+    evaluate(solver)
     x = np.arange(W)[None, :]
     inside = (x - mean >= 0) & (x + mean <= W - 1)
     assert 0.05 < (~inside).mean() < 0.95
     phi = solver.levelset.phi.to_numpy()
     visible = (phi < 0) & (solver.occ.phi_plus.to_numpy() < 0)
-    np.testing.assert_allclose(solver.weight_fg.to_numpy(),
+    np.testing.assert_allclose(weight_fg.to_numpy(),
                                np.where(inside & (phi >= 0), prec ** 2, 0.0), rtol=1e-6)
-    np.testing.assert_allclose(solver.weight_bg.to_numpy(),
+    np.testing.assert_allclose(weight_bg.to_numpy(),
                                np.where(inside & visible, prec ** 2, 0.0), rtol=1e-6)
     solver.close()
 
