@@ -123,12 +123,12 @@ class PatchHierarchy:
             return pool.field(dtype, (H + 2 * m, W + 2 * m) + extra,
                               offset=(-m, -m) + (0,) * len(extra), order=order)
 
-        # upward: normalised patch-mean cost volumes, in-image pixel counts, D sums, extremes.
+        # upward: normalised patch-mean cost volumes, D sums, extremes (a patch's in-image
+        # pixel count is its clipped square: :meth:`_in_image_count`).
         # Level 1 is also M of the Eq. 2 step, read at Theta_j per pixel: rows, disparities,
         # columns in memory; the patch levels are scanned along c per patch (messages)
         self.cost = [padded(lev, C, order=ROWS_DISPARITIES_COLUMNS if i == 0 else None)
                      for i, lev in enumerate(self.levels)]
-        self.count = [padded(lev, dtype=ti.i32) for lev in self.levels]
         # the per-iteration relays are lane planes (blocks of ``lanes`` patch centres along
         # x; see :mod:`lss_kernels.lanes`): the upward and downward stencils run a block per
         # loop index.  Columns -left .. right - 1 of :func:`column_spans`, rows as ``padded``
@@ -178,9 +178,20 @@ class PatchHierarchy:
         self.curve = pool.field(ti.f32, (C,))
 
     # ------------------------------------------------------------------ set-up (upward costs)
+    @ti.func
+    def _in_image_count(self, size: ti.template(), y, x):
+        """In-image pixels of the patch of side ``size`` centred on (y, x) (``x`` may be a
+        vector of centres): its square ``[c - size // 2, c - size // 2 + size - 1]`` per axis,
+        clipped to the image; 0 for a patch wholly outside.  A parent's count is the sum of
+        its children's, since the children tile it."""
+        h = ti.static(size // 2)
+        rows = ti.max(ti.min(y - h + size - 1, self.H - 1) - ti.max(y - h, 0) + 1, 0)
+        cols = ti.max(ti.min(x - h + size - 1, self.W - 1) - ti.max(x - h, 0) + 1, 0)
+        return rows * cols
+
     @ti.kernel
     def _cost_from_pixels(self, left: ti.template(), right: ti.template(), dst: ti.template(),
-                          count: ti.template(), offs: ti.template()):
+                          offs: ti.template()):
         H, W = self.H, self.W
         for y, x, k in dst:
             c = k + 1
@@ -198,24 +209,20 @@ class PatchHierarchy:
                     total += diff / 3.0
                     n += 1
             dst[y, x, k] = total / ti.max(n, 1)
-            if k == 0:
-                count[y, x] = n
 
     @ti.kernel
-    def _cost_from_children(self, src: ti.template(), src_count: ti.template(),
-                            dst: ti.template(), count: ti.template(), offs: ti.template()):
+    def _cost_from_children(self, src: ti.template(), child_size: ti.template(),
+                            dst: ti.template(), offs: ti.template()):
         for y, x, k in dst:
             total = 0.0
             n = 0
             for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
                 cy = y + offs[jy]
                 cx = x + offs[jx]
-                m = src_count[cy, cx]
+                m = self._in_image_count(child_size, cy, cx)
                 total += src[cy, cx, k] * m
                 n += m
             dst[y, x, k] = total / ti.max(n, 1)
-            if k == 0:
-                count[y, x] = n
 
     @ti.kernel
     def _normalise(self, vol: ti.template()):
@@ -244,10 +251,10 @@ class PatchHierarchy:
         (image coordinates clamped at the borders); each higher level sums its children.
         """
         lev0 = self.levels[0]
-        self._cost_from_pixels(left, right, self.cost[0], self.count[0], lev0.offsets)
+        self._cost_from_pixels(left, right, self.cost[0], lev0.offsets)
         for i in range(1, len(self.levels)):
-            self._cost_from_children(self.cost[i - 1], self.count[i - 1], self.cost[i],
-                                     self.count[i], self.levels[i].offsets)
+            self._cost_from_children(self.cost[i - 1], self.levels[i - 1].size, self.cost[i],
+                                     self.levels[i].offsets)
         for vol in self.cost:
             self._normalise(vol)
         self._cached_beta = None
@@ -438,8 +445,6 @@ class PatchHierarchy:
         time, in SIMD lanes: the relays are stored as whole blocks, d_p, sigma_p and the
         validity only if ``keep``."""
         L = ti.static(self.lanes)
-        s = ti.static(size)                  # the patch side
-        h = ti.static(size // 2)
         cf = ti.cast(self.C, ti.f32)
         for y, blk in ti.ndrange(self.H, self.image_blocks):
             x = ti.Vector([blk * L + lane for lane in ti.static(range(L))])
@@ -447,10 +452,9 @@ class PatchHierarchy:
             if use_validity:
                 w &= ti.cast((phi_max[y, blk] > 0) != (phi_plus_min[y, blk] < 0),
                              ti.i32)                  # Eq. 4
-            # the prior mean m: the patch's in-image pixel count is its clipped square
-            rows = ti.min(y - h + s - 1, self.H - 1) - ti.max(y - h, 0) + 1
-            cols = ti.min(x - h + s - 1, self.W - 1) - ti.max(x - h, 0) + 1
-            m = ti.min(ti.max(d_sum[y, blk] / ti.max(rows * cols, 1), 0.0), cf)
+            # the prior mean m
+            n = self._in_image_count(size, y, x)
+            m = ti.min(ti.max(d_sum[y, blk] / ti.max(n, 1), 0.0), cf)
             lo = ti.cast(ti.floor(m), ti.i32)            # candidates c <= lo ...
             hi = ti.max(ti.cast(ti.ceil(m), ti.i32), 1)  # ... and c >= hi
             key = 2 * lo + 1 + ti.cast(hi == lo, ti.i32)
@@ -602,6 +606,14 @@ class PatchHierarchy:
     def _read_curve(self, cost: ti.template(), y: ti.i32, x: ti.i32):
         for k in range(self.C):
             self.curve[k] = cost[y, x, k]
+
+    def in_image_count(self, level, y, x):
+        """:meth:`_in_image_count` of one patch of ``level``, on the host."""
+        size = self.levels[level].size
+        lo_y, lo_x = y - size // 2, x - size // 2
+        rows = min(lo_y + size - 1, self.H - 1) - max(lo_y, 0) + 1
+        cols = min(lo_x + size - 1, self.W - 1) - max(lo_x, 0) + 1
+        return max(rows, 0) * max(cols, 0)
 
     def patch_cost(self, level, y, x):
         """The normalised patch-mean matching cost C_p(c), ``c = 1 .. c_max``, of one patch."""

@@ -438,17 +438,13 @@ class LevelSet:
         x0 = ti.min(ti.cast(ti.floor(xf), ti.i32), ti.max(self.W - 2, 0))
         x1 = ti.min(x0 + 1, self.W - 1)
         tx = xf - x0
-        kf = ti.min(ti.max(c - 1.0, 0.0), C - 1.0)
-        k0 = ti.min(ti.cast(ti.floor(kf), ti.i32), ti.max(C - 2, 0))
-        k1 = ti.min(k0 + 1, C - 1)
-        tk = kf - k0
-        a = (1.0 - tk) * cost[y, x0, k0] + tk * cost[y, x0, k1]
-        b = (1.0 - tk) * cost[y, x1, k0] + tk * cost[y, x1, k1]
+        a = self._cost_at_pixel(cost, y, x0, c, C)
+        b = self._cost_at_pixel(cost, y, x1, c, C)
         return (1.0 - tx) * a + tx * b
 
     @ti.func
     def _cost_at_pixel(self, cost: ti.template(), y, x, c, C: ti.template()):
-        """:meth:`_cost_at` at an integer x (a pixel): linear in c only."""
+        """M(x, y, c) at an integer x (a pixel): linear in c only (clamped to the volume)."""
         kf = ti.min(ti.max(c - 1.0, 0.0), C - 1.0)
         k0 = ti.min(ti.cast(ti.floor(kf), ti.i32), ti.max(C - 2, 0))
         k1 = ti.min(k0 + 1, C - 1)

@@ -354,7 +354,7 @@ class Solver:
         matching = h.patch_cost(level, y, x).astype(np.float64)
         c = np.arange(1, self.c_max + 1, dtype=np.float64)
         d_sum = h.d_sum[level][y, x // h.lanes][x % h.lanes]
-        d_mean = d_sum / max(h.count[level][y, x], 1)
+        d_mean = d_sum / max(h.in_image_count(level, y, x), 1)
         prior = self.iteration > 1
         beta = self.params.beta / self.c_max if prior else 0.0
         cost = matching + beta * np.abs(c - d_mean)
