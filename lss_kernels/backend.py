@@ -14,7 +14,7 @@ from taichi.lang.ast import ast_transformer_utils as _ast_utils
 
 ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu", "auto")
 
-_state = {"arch": None, "threads": None}
+_state = {"arch": None, "threads": None, "kwargs": None}
 
 #: Memory order of a ``(H, W, c_max)`` volume that is read at a disparity per pixel (the
 #: Eq. 2 step's matching costs, B at Theta_1): rows, then disparities, then columns, so that
@@ -154,8 +154,22 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
         _state["arch"] = _state["threads"] = None
         raise ValueError(f"arch: {arch!r} is not available on this machine "
                          f"({str(exc).splitlines()[0]})") from None
-    _state["arch"], _state["threads"] = arch, threads
+    _state["arch"], _state["threads"], _state["kwargs"] = arch, threads, kwargs
     return arch
+
+
+def restart() -> None:
+    """Start Taichi again with the settings of the last :func:`init`.
+
+    Every field allocated before becomes invalid: close the solvers first.  Taichi numbers
+    the SNodes of a process from 0 at ``ti.init`` and its offline cache keys kernels on those
+    numbers, so a solver built after a restart finds the kernels that a fresh process
+    compiled for its size, whatever was built before it in this process (``lss eval`` builds
+    one solver per image size and search range).
+    """
+    if _state.get("kwargs") is None:
+        raise RuntimeError("backend.restart: Taichi was not initialised by backend.init")
+    ti.init(**_state["kwargs"])
 
 
 def ensure_init() -> str:
@@ -188,32 +202,43 @@ def _zero_all(fields: ti.template()):
 
 
 class FieldPool:
-    """Allocates fields in one SNode tree that can be freed as a whole.
+    """Allocates fields in SNode trees that can be freed as a whole.
 
     Plain ``ti.field(shape=...)`` allocations live until the process ends; a solver that is
     built once per image pair would leak them.  Classes take a pool, ask it for their fields,
     and the owner calls :meth:`finalize` once everything is declared and :meth:`destroy` when
     done.  Fields cannot be read or written before :meth:`finalize`.
+
+    Two trees: the fields whose shape depends on the disparity range (``volume=True``: the
+    cost volumes) and the rest, finalised first.  Taichi's offline cache keys a kernel on
+    every tree it touches (shapes and SNode ids), so kernels that touch no volume -- the
+    median, phi's derivatives, the upward and downward passes, the fit -- compile once per
+    image size, whatever the disparity range, instead of once per (size, range).  The SNode
+    ids count the nodes declared before in the process, which do not depend on the range.
     """
 
     def __init__(self):
-        self._builder = ti.FieldsBuilder()
-        self._tree = None
+        # created on first use: Taichi refuses to run while a builder is not finalised
+        self._builders = [None, None]
+        self._trees = []
         self.nbytes = 0
         self.fields = []
 
-    def _place(self, f, shape, offset, nbytes, order=None):
+    def _place(self, f, shape, offset, nbytes, order=None, volume=False):
         shape = tuple(int(s) for s in shape)
+        if self._builders[int(volume)] is None:
+            self._builders[int(volume)] = ti.FieldsBuilder()
+        builder = self._builders[int(volume)]
         if shape and order is not None:
-            node = self._builder
+            node = builder
             for axis in order:
                 node = node.dense(ti.axes(axis), shape[axis])
             node.place(f, offset=offset)
         elif shape:
             axes = ti.axes(*range(len(shape)))
-            self._builder.dense(axes, shape).place(f, offset=offset)
+            builder.dense(axes, shape).place(f, offset=offset)
         else:
-            self._builder.place(f)
+            builder.place(f)
         n = 1
         for s in shape:
             n *= s
@@ -221,16 +246,17 @@ class FieldPool:
         self.fields.append(f)
         return f
 
-    def field(self, dtype, shape, offset=None, order=None):
+    def field(self, dtype, shape, offset=None, order=None, volume=False):
         """A scalar field; ``order``: its axes from the outermost to the innermost in memory
-        (default: as indexed, the last axis innermost)."""
-        return self._place(ti.field(dtype), shape, offset, _bytes(dtype), order)
+        (default: as indexed, the last axis innermost); ``volume``: its shape depends on the
+        disparity range (see the class)."""
+        return self._place(ti.field(dtype), shape, offset, _bytes(dtype), order, volume)
 
     def vector(self, n, dtype, shape, offset=None):
         return self._place(ti.Vector.field(n, dtype), shape, offset, n * _bytes(dtype))
 
     def finalize(self):
-        self._tree = self._builder.finalize()
+        self._trees = [b.finalize() for b in self._builders if b is not None]
         return self
 
     def zero(self):
@@ -239,6 +265,6 @@ class FieldPool:
         _zero_all(tuple(self.fields))
 
     def destroy(self):
-        if self._tree is not None:
-            self._tree.destroy()
-            self._tree = None
+        for tree in self._trees:
+            tree.destroy()
+        self._trees = []

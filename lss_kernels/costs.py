@@ -51,7 +51,8 @@ class BoundaryCosts:
     def __init__(self, pool, height, width, c_max):
         self.H, self.W, self.C = int(height), int(width), int(c_max)
         H, W, C = self.H, self.W, self.C
-        self.b_occ = pool.field(ti.f32, (H, W, C), order=ROWS_DISPARITIES_COLUMNS)
+        self.b_occ = pool.field(ti.f32, (H, W, C), order=ROWS_DISPARITIES_COLUMNS,
+                                volume=True)
         self.edge_left = pool.field(ti.f32, (H, W))
         self.edge_right = pool.field(ti.f32, (H, W))
         self._max = pool.field(ti.f32, ())
@@ -59,7 +60,8 @@ class BoundaryCosts:
         # scratch, kept for the solver's life: destroying an SNode tree makes Taichi drop
         # every compiled kernel, which a reset solver would then compile again
         rows = max(1, -(-H * min(C, CHUNK) // C))               # B_occ, a block of rows at a time
-        self._chunk = pool.field(ti.f32, (rows, W, C), order=ROWS_DISPARITIES_COLUMNS)
+        self._chunk = pool.field(ti.f32, (rows, W, C), order=ROWS_DISPARITIES_COLUMNS,
+                                 volume=True)
         self._edt3 = None
         self._edt2 = self._dist2 = None
 

@@ -66,10 +66,11 @@ def _init_worker(arch: str, threads: int, methods) -> None:
 _SOLVER = {}
 
 
-def _solve(scene: io.Scene, params, trace: bool = False):
+def _solve(scene: io.Scene, params, trace: bool = False, restart: bool = False):
     """Solve a scene with this process's solver; with ``trace``, also score the left view
-    at the end of every stop window and at the last iteration.  Returns the result, the
-    trace rows and the seconds spent scoring them."""
+    at the end of every stop window and at the last iteration; with ``restart``, start
+    Taichi again before building a new solver (see :func:`lss_kernels.backend.restart`).
+    Returns the result, the trace rows and the seconds spent scoring them."""
     from .solver import Solver
     if scene.init_ellipse_cyclopean is not None:
         init, frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
@@ -79,6 +80,9 @@ def _solve(scene: io.Scene, params, trace: bool = False):
     solver = _SOLVER.get(key)
     if solver is None:
         _release_solver()
+        if restart:
+            from . import backend
+            backend.restart()
         solver = Solver(scene.left, scene.right, scene.d_max, init, params=params,
                         init_frame=frame)
         _SOLVER[key] = solver
@@ -119,11 +123,12 @@ def _solver_key(task):
         return (1, (), 0, str(scene_dir))
 
 
-def _run_method(method: str, scene: io.Scene, params, trace: bool = False):
+def _run_method(method: str, scene: io.Scene, params, trace: bool = False,
+                restart: bool = False):
     """Disparity and occlusion (left view) of one method on one scene, extra facts, and the
     seconds spent on the trace."""
     if method == "lss":
-        result, rows, spent = _solve(scene, params, trace)
+        result, rows, spent = _solve(scene, params, trace, restart)
         extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason)}
         if trace:
             extra["trace"] = rows
@@ -132,12 +137,13 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False):
     return disparity, occlusion, {}, 0.0
 
 
-def _run_one(scene_dir: str, method: str, run_dir: str, params, trace: bool = False) -> dict:
+def _run_one(scene_dir: str, method: str, run_dir: str, params, trace: bool = False,
+             restart: bool = False) -> dict:
     """Run, score and save one (scene, method); return the record written to result.json
     (``seconds`` leaves out the scoring of a trace)."""
     scene = io.load_scene(scene_dir)
     start = time.perf_counter()
-    disparity, occlusion, extra, spent = _run_method(method, scene, params, trace)
+    disparity, occlusion, extra, spent = _run_method(method, scene, params, trace, restart)
     seconds = time.perf_counter() - start - spent
     disparity = np.asarray(disparity, dtype=np.float32)
     occlusion = np.asarray(occlusion, dtype=bool)
@@ -179,7 +185,8 @@ def _check_methods(methods) -> tuple:
 
 def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs: int = 1,
              force: bool = False, arch: str = "cpu", params=None,
-             progress: bool = True, trace: bool = False) -> list:
+             progress: bool = True, trace: bool = False,
+             restart_taichi: bool = False) -> list:
     """Run ``methods`` on every scene of ``dataset_dir``, score them and write the report.
 
     Parameters
@@ -208,6 +215,12 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
         ``trace``) and write ``convergence.csv``, ``convergence.md`` (accuracy against
         iterations, and where variants of the stopping rule would have stopped) and
         ``convergence.png``.  The scoring is left out of ``seconds``.
+    restart_taichi : bool
+        With ``jobs=1``: start Taichi again (:func:`lss_kernels.backend.restart`) before
+        each new solver, so that it finds the kernels a fresh process compiled for its image
+        size and search range, whatever ran before it.  Every Taichi field of the calling
+        process becomes invalid: ``lss eval`` sets it, as it owns its process.  Worker
+        processes (``jobs > 1``) always do.
 
     Returns
     -------
@@ -243,7 +256,7 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
                                                    "skipped": True}
             else:
                 todo.append((os.fspath(scene_dir), method, os.fspath(run_dir), params,
-                             trace and method == "lss"))
+                             trace and method == "lss", restart_taichi or jobs > 1))
 
     total = len(names) * len(methods)
     log = _Progress(total, enabled=progress)
@@ -532,7 +545,7 @@ def main_eval(args) -> int:
     try:
         rows = run_eval(args.dataset_dir, methods=methods, out=args.out, jobs=args.jobs,
                         force=args.force, arch=args.arch, progress=not args.quiet,
-                        trace=args.trace)
+                        trace=args.trace, restart_taichi=True)
     except (ValueError, FileNotFoundError, ImportError) as error:
         print(f"lss eval: error: {error}", file=sys.stderr)
         return 2

@@ -121,7 +121,8 @@ class PatchHierarchy:
         def padded(lev, *extra, dtype=ti.f32, order=None):
             m = lev.margin
             return pool.field(dtype, (H + 2 * m, W + 2 * m) + extra,
-                              offset=(-m, -m) + (0,) * len(extra), order=order)
+                              offset=(-m, -m) + (0,) * len(extra), order=order,
+                              volume=len(extra) > 0)
 
         # upward: normalised patch-mean cost volumes, D sums, extremes (a patch's in-image
         # pixel count is its clipped square: :meth:`_in_image_count`).
@@ -175,7 +176,7 @@ class PatchHierarchy:
         self.consensus_mean = pool.field(ti.f32, (H, W))  # d-bar, cyclopean units
         self._lo = pool.field(ti.f32, ())
         self._hi = pool.field(ti.f32, ())
-        self.curve = pool.field(ti.f32, (C,))
+        self.curve = pool.field(ti.f32, (C,), volume=True)
 
     # ------------------------------------------------------------------ set-up (upward costs)
     @ti.func

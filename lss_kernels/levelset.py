@@ -547,11 +547,13 @@ class LevelSet:
 
     @ti.func
     def _store(self, dst: ti.template(), y, x, value, count: ti.template(),
-               disparity: ti.template()):
+               disparity: ti.template(), c_max):
         """dst[y, x] = value; with ``count``, first tally the sign flip against dst's previous
-        value and the new foreground.  With ``disparity`` = ``(D, shapes, c_max)`` (not
-        ``()``), also Eq. 3's D = Theta_1 where value > 0, else Theta_2, clamped to
-        [0, c_max] (a quadratic can extrapolate outside the searched range)."""
+        value and the new foreground.  With ``disparity`` = ``(D, shapes)`` (not ``()``),
+        also Eq. 3's D = Theta_1 where value > 0, else Theta_2, clamped to [0, c_max] (a
+        quadratic can extrapolate outside the searched range).  ``c_max`` is a kernel
+        argument, not a constant, so that the kernels do not depend on the disparity range
+        (see :class:`lss_kernels.backend.FieldPool`)."""
         if ti.static(count):
             now = value > 0
             if now != (dst[y, x] > 0):
@@ -560,10 +562,10 @@ class LevelSet:
                 self.area[None] += 1
         dst[y, x] = value
         if ti.static(len(disparity) > 0):
-            D, shapes, c_max = ti.static(disparity)
+            D, shapes = ti.static(disparity)
             j = 0 if value > 0 else 1
             v = shapes.value(j, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
-            D[y, x] = ti.min(ti.max(v, 0.0), ti.cast(c_max, ti.f32))
+            D[y, x] = ti.min(ti.max(v, 0.0), c_max)
 
     @ti.func
     def _descend(self, yb, t, held, node: ti.template()):
@@ -613,7 +615,7 @@ class LevelSet:
 
     @ti.func
     def _store_medians(self, dst: ti.template(), count: ti.template(),
-                       disparity: ti.template()):
+                       disparity: ti.template(), c_max):
         """Stage 3: the medians into dst (and D, see :meth:`_store`).  With ``count``,
         ``flipped`` and ``area`` count the sign changes against dst's previous content and
         the pixels > 0."""
@@ -624,15 +626,15 @@ class LevelSet:
                 for lane in ti.static(range(self.lanes)):
                     y = yb * ti.static(self.lanes) + lane
                     if y < self.H:
-                        self._store(dst, y, x, medians[lane], count, disparity)
+                        self._store(dst, y, x, medians[lane], count, disparity, c_max)
 
     @ti.kernel
     def _copy(self, src: ti.template(), dst: ti.template(), count: ti.template(),
-              disparity: ti.template()):
+              disparity: ti.template(), c_max: ti.f32):
         """dst = src; with ``count`` and ``disparity``, as in :meth:`_store`."""
         self._start_count(count)
         for y, x in dst:
-            self._store(dst, y, x, src[y, x], count, disparity)
+            self._store(dst, y, x, src[y, x], count, disparity, c_max)
 
     @ti.kernel
     def _features(self, src: ti.template(), foreground: ti.i32):
@@ -665,18 +667,20 @@ class LevelSet:
         ``count``, also the sign flips against dst's previous content (``flipped``) and the
         pixels > 0 (``area``); with ``disparity`` = ``(D, shapes, c_max)``, also Eq. 3's D
         of the new dst (see :meth:`_store`)."""
+        c_max = float(disparity[2]) if disparity else 0.0
+        disparity = tuple(disparity[:2])
         if self.median_size == 1:
-            self._copy(src, dst, count, disparity)
+            self._copy(src, dst, count, disparity, c_max)
         else:
-            self._median(src, dst, count, disparity)
+            self._median(src, dst, count, disparity, c_max)
 
     @ti.kernel
     def _median(self, src: ti.template(), dst: ti.template(), count: ti.template(),
-                disparity: ti.template()):
+                disparity: ti.template(), c_max: ti.f32):
         """The stages of :meth:`median`, in one launch."""
         self._sort_columns(src)
         self._median_of_columns()
-        self._store_medians(dst, count, disparity)
+        self._store_medians(dst, count, disparity, c_max)
 
     @ti.kernel
     def net_change(self):
@@ -709,4 +713,4 @@ class LevelSet:
         """phi = phi_scale x signed distance of a boolean ``(H, W)`` mask."""
         self._from_mask(np.ascontiguousarray(mask, dtype=np.int32))
         self.reinitialise(self.phi_next)
-        self._copy(self.phi_next, self.phi, False, ())
+        self._copy(self.phi_next, self.phi, False, (), 0.0)

@@ -56,12 +56,18 @@ class OcclusionGeometry:
             v = (1.0 - t) * f[y, x0] + t * f[y, x0 + 1]
         return v
 
-    @ti.kernel
-    def compute(self, shapes: ti.template(), phi_x: ti.template(), ray_cast: ti.i32):
+    def compute(self, shapes, phi_x, ray_cast):
         """delta_theta for every pixel (``phi_x``: dphi/dx, a plane or a lane plane).  The
         ray cast runs a block of pixels in SIMD lanes: the block steps until every lane has
         reached its fixed point (a lane there repeats it), so each pixel gets the value of
         its own fixed-point iteration.  phi(x + delta_theta): :meth:`refresh_phi_plus`."""
+        self._ray_cast(shapes, phi_x, int(ray_cast), 2.0 * self.C)
+
+    @ti.kernel
+    def _ray_cast(self, shapes: ti.template(), phi_x: ti.template(), ray_cast: ti.i32,
+                  t_max: ti.f32):
+        """:meth:`compute`; ``t_max`` (the largest jump, 2 c_max) is an argument, not a
+        constant, so that the kernel does not depend on the disparity range."""
         L = ti.static(self.lanes)
         for y, b in ti.ndrange(self.H, self.blocks):
             xf = lanes.columns(b, L)
@@ -76,7 +82,7 @@ class OcclusionGeometry:
             if ray_cast:
                 for _ in range(FIXED_POINT_STEPS):
                     t_next = ti.min(ti.max(th1 - shapes.value(1, xf - s * t, yf), 0.0),
-                                    2.0 * self.C)
+                                    t_max)
                     t_next = ti.select(cast, t_next, t)
                     if all(t_next == t):
                         break  # every fixed point reached: the remaining steps repeat it

@@ -99,3 +99,57 @@ def test_pool_field_in_another_memory_order_keeps_its_indexing(ti_arch):
         assert pool.nbytes == 2 * 60 * 4
     finally:
         pool.destroy()
+
+
+CACHE_SCRIPT = r"""
+import json, sys
+from pathlib import Path
+from lss_kernels import backend
+from lss_kernels.params import Params
+from lss_kernels.scenes import make_scene
+from lss_kernels.solver import Solver
+
+cache = Path(sys.argv[1])
+backend.init("cpu", threads=1, offline_cache=True)
+scene = make_scene("tiny")
+seen = []
+
+def solve(d_max):
+    # ten iterations: the prior, the upward pass and a re-initialisation; then the left view
+    s = Solver(scene.left, scene.right, d_max, scene.init_ellipse,
+               params=Params(max_iterations=10, stop_fraction=0.0))
+    s.run()
+    s.left_view()
+    s.close()
+    backend.restart()                   # also writes the cache of the program it ends
+    seen.append(sorted(p.name for p in cache.rglob("*") if p.is_file()))
+
+solve(scene.d_max)
+solve(scene.d_max + 4)                  # same size, another search range
+solve(scene.d_max)                      # the first again, after another solver
+print(json.dumps(seen))
+"""
+
+
+def test_kernels_without_volumes_are_cached_across_search_ranges(tmp_path, ti_arch):
+    """Taichi keys a kernel's offline-cache entry on the SNode trees it touches.  With the
+    volumes in a tree of their own, a new search range at a known image size compiles only
+    the kernels that read a volume; after ``backend.restart`` a solver finds the entries a
+    fresh process made for its size and range, whatever was built before it."""
+    import json
+    import os
+    import subprocess
+    import sys
+    if ti_arch != "cpu":
+        pytest.skip("the offline cache is exercised on the CPU")
+    cache = tmp_path / "cache"
+    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=str(cache))
+    proc = subprocess.run([sys.executable, "-c", CACHE_SCRIPT, str(cache)], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    first, second, third = (set(s) for s in json.loads(proc.stdout.splitlines()[-1]))
+    kernels = lambda names: {n for n in names if n.endswith(".tic")}
+    new = kernels(second) - kernels(first)
+    assert kernels(first) and new, "the second range should compile its volume kernels"
+    assert len(new) <= len(kernels(first)) // 2, (len(new), len(kernels(first)))
+    assert kernels(third) == kernels(second), "the first range again compiled anew"
