@@ -151,7 +151,7 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
     try:
         ti.init(**kwargs)
     except RuntimeError as exc:
-        _state["arch"] = _state["threads"] = None
+        _state["arch"] = _state["threads"] = _state["kwargs"] = None
         raise ValueError(f"arch: {arch!r} is not available on this machine "
                          f"({str(exc).splitlines()[0]})") from None
     _state["arch"], _state["threads"], _state["kwargs"] = arch, threads, kwargs
@@ -167,7 +167,7 @@ def restart() -> None:
     compiled for its size, whatever was built before it in this process (``lss eval`` builds
     one solver per image size and search range).
     """
-    if _state.get("kwargs") is None:
+    if _state["kwargs"] is None:
         raise RuntimeError("backend.restart: Taichi was not initialised by backend.init")
     ti.init(**_state["kwargs"])
 

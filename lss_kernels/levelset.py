@@ -662,13 +662,12 @@ class LevelSet:
             self.distance.run(self.distance_map)
             self._signed(phi, region, self.scale)
 
-    def median(self, src, dst, count=False, disparity=()):
+    def median(self, src, dst, count=False, disparity=(), c_max=0.0):
         """dst = the ``median_size``-square median of src (symmetric borders); with
         ``count``, also the sign flips against dst's previous content (``flipped``) and the
-        pixels > 0 (``area``); with ``disparity`` = ``(D, shapes, c_max)``, also Eq. 3's D
-        of the new dst (see :meth:`_store`)."""
-        c_max = float(disparity[2]) if disparity else 0.0
-        disparity = tuple(disparity[:2])
+        pixels > 0 (``area``); with ``disparity`` = ``(D, shapes)``, also Eq. 3's D of the
+        new dst, clamped to [0, ``c_max``] (see :meth:`_store`)."""
+        c_max = float(c_max)
         if self.median_size == 1:
             self._copy(src, dst, count, disparity, c_max)
         else:
@@ -702,7 +701,7 @@ class LevelSet:
         if reinit:
             self.reinitialise(self.phi_next)
         self.median(self.phi_next, self.phi, count=True,
-                    disparity=() if D is None else (D, shapes, c_max))
+                    disparity=() if D is None else (D, shapes), c_max=c_max)
 
     @ti.kernel
     def _from_mask(self, mask: ti.types.ndarray()):
