@@ -1,7 +1,7 @@
 """lss_kernels: two-layer level-set stereo with exact occlusion geometry (Wang & Zickler).
 
 Public API: :func:`solve`, :class:`Solver`, :class:`Params`, :class:`Result`.
-Importing the package does not initialise Taichi; :func:`lss_kernels.backend.init` does.
+Importing the package does not initialise Taichi; :func:`lss_kernels.kernels.backend.init` does.
 """
 from .params import Params
 

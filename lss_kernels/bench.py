@@ -241,7 +241,7 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
         out["block_numpy"] = [sum(b.values()) for b in numpy_blocks]
         out["numpy_iterations"] = m
     out["maxrss_bytes"] = _maxrss_bytes()
-    from . import backend
+    from .kernels import backend
     if backend.current_arch() not in (None, "cpu"):
         out["bandwidth_gbs"] = device_bandwidth()   # after the RSS reading: it allocates
     return out
@@ -251,7 +251,7 @@ def _worker(argv=None):
     """``python -c 'from lss_kernels.bench import _worker; _worker()' JSON``: one configuration
     in a fresh process (its own Taichi init, thread count and peak RSS); prints one line
     ``BENCH_RESULT {...}``."""
-    from . import backend
+    from .kernels import backend
     cfg = json.loads((argv or sys.argv[1:])[0])
     backend.init(arch=cfg["arch"], threads=cfg.get("threads"),
                  offline_cache=cfg.get("offline_cache", True))
@@ -595,7 +595,7 @@ def add_cli(subparsers):
 
 def main_bench(args) -> int:
     """Entry point of ``lss bench`` (``args`` from :func:`add_cli`)."""
-    from . import backend
+    from .kernels import backend
     threads = args.threads or [None]
     if any(t is not None and t < 1 for t in threads):
         raise ValueError(f"--threads: expected positive integers, got {threads}")

@@ -22,7 +22,7 @@ if "--json" in sys.argv[1:]:
     os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
 
 from . import __version__  # noqa: E402
-from .backend import ARCHES  # noqa: E402
+from .kernels.backend import ARCHES  # noqa: E402
 
 __all__ = ["main"]
 
@@ -172,7 +172,7 @@ def write_outputs(out_dir, result, left, params, extra=None):
 
 
 def main_solve(args):
-    from . import backend
+    from .kernels import backend
     from .solver import Solver
     params = _params(args)
     left, right, d_max, init, init_frame, scene = _inputs(args)

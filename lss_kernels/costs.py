@@ -20,8 +20,8 @@ import math
 import numpy as np
 import taichi as ti
 
-from .backend import ROWS_DISPARITIES_COLUMNS
-from .distance import INF, DistanceTransform
+from .kernels.backend import ROWS_DISPARITIES_COLUMNS
+from .kernels.distance import INF, DistanceTransform
 
 __all__ = ["BoundaryCosts", "gaussian_taps"]
 

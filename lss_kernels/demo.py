@@ -132,7 +132,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
         Print one line per recorded iteration and a summary.
     params : Params or None
     arch : str or None
-        Passed to the solver (Taichi must already be initialised; see :mod:`lss_kernels.backend`).
+        Passed to the solver (Taichi must already be initialised; see :mod:`lss_kernels.kernels.backend`).
 
     Returns
     -------
@@ -242,7 +242,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
 
 def add_cli(subparsers):
     """Register the ``demo`` sub-command on an ``argparse`` sub-parsers object."""
-    from .backend import ARCHES
+    from .kernels.backend import ARCHES
     p = subparsers.add_parser(
         "demo", help="watch the solver evolve (frames, GIF, a patch's message; paper Fig. 1)",
         description="Run the solver on a built-in scene, a scene folder or a stereo pair and "
@@ -319,7 +319,7 @@ def main_demo(args) -> int:
     except (ValueError, KeyError, FileNotFoundError) as exc:
         return _fail(str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc))
 
-    from . import backend
+    from .kernels import backend
     arch = backend.init(arch=args.arch)
     if not args.quiet:
         print(f"lss demo: {left.shape[1]}x{left.shape[0]}, d_max {d_max:g}, arch {arch}, "

@@ -54,7 +54,7 @@ _MEANS = ("occ_f1", "occ_precision", "occ_recall", "bad4", "seconds")
 def _init_worker(arch: str, threads: int, methods) -> None:
     """Per-process set-up: Taichi for the solver, OpenCV's thread count for the peers."""
     if "lss" in methods:
-        from . import backend
+        from .kernels import backend
         backend.init(arch=arch, threads=threads)
     if any(m in BASELINES for m in methods):
         require_opencv().setNumThreads(threads)
@@ -69,7 +69,7 @@ _SOLVER = {}
 def _solve(scene: io.Scene, params, trace: bool = False, restart: bool = False):
     """Solve a scene with this process's solver; with ``trace``, also score the left view
     at the end of every stop window and at the last iteration; with ``restart``, start
-    Taichi again before building a new solver (see :func:`lss_kernels.backend.restart`).
+    Taichi again before building a new solver (see :func:`lss_kernels.kernels.backend.restart`).
     Returns the result, the trace rows and the seconds spent scoring them."""
     from .solver import Solver
     if scene.init_ellipse_cyclopean is not None:
@@ -81,7 +81,7 @@ def _solve(scene: io.Scene, params, trace: bool = False, restart: bool = False):
     if solver is None:
         _release_solver()
         if restart:
-            from . import backend
+            from .kernels import backend
             backend.restart()
         solver = Solver(scene.left, scene.right, scene.d_max, init, params=params,
                         init_frame=frame)
@@ -205,7 +205,7 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
     force : bool
         Recompute runs that already have a ``result.json``.
     arch : str
-        Taichi arch for ``lss`` (see :func:`lss_kernels.backend.init`).
+        Taichi arch for ``lss`` (see :func:`lss_kernels.kernels.backend.init`).
     params : lss_kernels.Params or None
         Solver parameters for ``lss`` (``None``: the paper's defaults).
     progress : bool
@@ -216,7 +216,7 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
         iterations, and where variants of the stopping rule would have stopped) and
         ``convergence.png``.  The scoring is left out of ``seconds``.
     restart_taichi : bool
-        With ``jobs=1``: start Taichi again (:func:`lss_kernels.backend.restart`) before
+        With ``jobs=1``: start Taichi again (:func:`lss_kernels.kernels.backend.restart`) before
         each new solver, so that it finds the kernels a fresh process compiled for its image
         size and search range, whatever ran before it.  Every Taichi field of the calling
         process becomes invalid: ``lss eval`` sets it, as it owns its process.  Worker
@@ -295,7 +295,7 @@ def _execute(todo, methods, jobs: int, arch: str):
         return
     if jobs == 1:
         if "lss" in methods:
-            from . import backend
+            from .kernels import backend
             if backend.current_arch() != arch:
                 backend.init(arch=arch)
         try:
@@ -516,7 +516,7 @@ def _write_panel(path: Path, scene_dir: Path, records, out: Path) -> None:
 
 def add_cli(subparsers) -> None:
     """Register ``eval`` on an ``argparse`` sub-parsers object (handler: :func:`main_eval`)."""
-    from .backend import ARCHES
+    from .kernels.backend import ARCHES
     p = subparsers.add_parser(
         "eval", help="run and score methods on a folder of scenes (the paper's Table 1)",
         description="Run each method on every scene folder of DATASET_DIR, score it with the "

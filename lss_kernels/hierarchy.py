@@ -28,8 +28,8 @@ to whole blocks (:func:`column_spans`).
 import numpy as np
 import taichi as ti
 
-from . import lanes
-from .backend import ROWS_DISPARITIES_COLUMNS
+from .kernels import lanes
+from .kernels.backend import ROWS_DISPARITIES_COLUMNS
 
 __all__ = ["Level", "PatchHierarchy", "level_geometry"]
 
@@ -99,7 +99,7 @@ class PatchHierarchy:
 
     Parameters
     ----------
-    pool : lss_kernels.backend.FieldPool
+    pool : lss_kernels.kernels.backend.FieldPool
         Where the fields are allocated.
     height, width : int
         Image size (cyclopean grid).
@@ -131,7 +131,7 @@ class PatchHierarchy:
         self.cost = [padded(lev, C, order=ROWS_DISPARITIES_COLUMNS if i == 0 else None)
                      for i, lev in enumerate(self.levels)]
         # the per-iteration relays are lane planes (blocks of ``lanes`` patch centres along
-        # x; see :mod:`lss_kernels.lanes`): the upward and downward stencils run a block per
+        # x; see :mod:`lss_kernels.kernels.lanes`): the upward and downward stencils run a block per
         # loop index.  Columns -left .. right - 1 of :func:`column_spans`, rows as ``padded``
         self.lanes = lanes.lanes_for_arch()
         self.spans = column_spans(self.levels, W, self.lanes)

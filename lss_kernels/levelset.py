@@ -22,9 +22,9 @@ import math
 import numpy as np
 import taichi as ti
 
-from . import lanes
+from .kernels import lanes
 from .costs import gaussian_taps
-from .distance import INF, DistanceTransform
+from .kernels.distance import INF, DistanceTransform
 
 __all__ = ["LevelSet", "median_network"]
 
@@ -553,7 +553,7 @@ class LevelSet:
         also Eq. 3's D = Theta_1 where value > 0, else Theta_2, clamped to [0, c_max] (a
         quadratic can extrapolate outside the searched range).  ``c_max`` is a kernel
         argument, not a constant, so that the kernels do not depend on the disparity range
-        (see :class:`lss_kernels.backend.FieldPool`)."""
+        (see :class:`lss_kernels.kernels.backend.FieldPool`)."""
         if ti.static(count):
             now = value > 0
             if now != (dst[y, x] > 0):

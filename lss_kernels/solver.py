@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import taichi as ti
 
-from . import backend
-from .backend import FieldPool
+from .kernels import backend
+from .kernels.backend import FieldPool
 from .costs import BoundaryCosts
 from .hierarchy import PatchHierarchy
 from .levelset import LevelSet

@@ -1,5 +1,5 @@
 """Shared fixtures: every test that needs Taichi runs on the arch given by --arch (cpu by
-default), initialised once per session through lss_kernels.backend."""
+default), initialised once per session through lss_kernels.kernels.backend."""
 import pytest
 
 

@@ -75,7 +75,7 @@ def test_compile_errors_still_point_at_the_line(ti_arch):
 
 def test_pool_field_in_another_memory_order_keeps_its_indexing(ti_arch):
     import numpy as np
-    from lss_kernels.backend import ROWS_DISPARITIES_COLUMNS, FieldPool
+    from lss_kernels.kernels.backend import ROWS_DISPARITIES_COLUMNS, FieldPool
     pool = FieldPool()
     vol = pool.field(ti.f32, (3, 5, 4), order=ROWS_DISPARITIES_COLUMNS)
     out = pool.field(ti.f32, (3, 5, 4))

@@ -4,7 +4,7 @@ import pytest
 import taichi as ti
 
 from lss_kernels import reference as ref
-from lss_kernels.backend import FieldPool
+from lss_kernels.kernels.backend import FieldPool
 from lss_kernels.params import Params
 
 H, W, C = 22, 34, 7
@@ -110,7 +110,7 @@ def test_hierarchy_in_one_pixel_blocks_matches_eight(pair, monkeypatch):
     extremes and validity exactly, the sums to float rounding (LLVM may associate a sum of
     lanes differently from a scalar one).  The blocks of 8 are checked against the
     reference in the tests around."""
-    from lss_kernels import lanes as lanes_module
+    from lss_kernels.kernels import lanes as lanes_module
     from lss_kernels.hierarchy import PatchHierarchy
     rng = np.random.default_rng(9)
     D = rng.random((H, W)) * C
@@ -356,7 +356,7 @@ def test_shape_keeps_previous_value_with_too_few_rows(ti_arch):
 
 @pytest.mark.parametrize("shape", [(13, 17, 1), (9, 11, 7), (1, 30, 1)])
 def test_distance_transform_is_exact(ti_arch, shape):
-    from lss_kernels.distance import INF, DistanceTransform
+    from lss_kernels.kernels.distance import INF, DistanceTransform
     rng = np.random.default_rng(8)
     feat = rng.random(shape) < 0.06
     feat.flat[5] = True
@@ -486,7 +486,7 @@ def test_median_network_selects_the_medians_of_a_tile_of_windows(k):
 def test_median_filter_matches_numpy_for_odd_and_tiny_sizes(ti_arch, monkeypatch, lanes, k,
                                                             height, width):
     """Rows in blocks of 8 (the CPU's; 13 rows end in a partial block) and of 1 (the GPUs')."""
-    from lss_kernels import lanes as lanes_module
+    from lss_kernels.kernels import lanes as lanes_module
     from lss_kernels.levelset import LevelSet
     monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
     pool = FieldPool()
@@ -606,7 +606,7 @@ def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
     of grad B) and phi's derivatives against the float64 reference, on an image whose width
     (34) ends in a partial block of lanes; also with blocks of one pixel, the GPUs'
     layout.  B is a given map here (a stand-in for the boundary costs' ``b_at``)."""
-    from lss_kernels import lanes as lanes_module
+    from lss_kernels.kernels import lanes as lanes_module
     from lss_kernels.levelset import LevelSet
     if lanes is not None:
         monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)

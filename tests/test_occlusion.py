@@ -4,7 +4,7 @@ import pytest
 import taichi as ti
 
 from lss_kernels import reference as ref
-from lss_kernels.backend import FieldPool
+from lss_kernels.kernels.backend import FieldPool
 
 H, W, C = 12, 64, 16
 X = np.broadcast_to(np.arange(W, dtype=np.float64), (H, W))
