@@ -25,12 +25,12 @@ import taichi as ti
 
 from .kernels import backend
 from .kernels.backend import FieldPool
-from .costs import BoundaryCosts
-from .hierarchy import PatchHierarchy
-from .levelset import LevelSet
-from .occlusion import OcclusionGeometry
+from .model.costs import BoundaryCosts
+from .model.hierarchy import PatchHierarchy
+from .model.levelset import LevelSet
+from .model.occlusion import OcclusionGeometry
 from .params import Params, c_max
-from .shapes import GlobalShapes
+from .model.shapes import GlobalShapes
 from .stopping import StopRule
 
 __all__ = ["Result", "Solver", "solve"]

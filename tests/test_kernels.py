@@ -31,7 +31,7 @@ def pair(ti_arch):
 
 @pytest.fixture(scope="module")
 def hierarchy(pair):
-    from lss_kernels.hierarchy import PatchHierarchy
+    from lss_kernels.model.hierarchy import PatchHierarchy
     pool = FieldPool()
     h = PatchHierarchy(pool, H, W, C, SIZES)
     lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
@@ -49,7 +49,7 @@ def _inside(h, field, level):
 
 
 def test_level_geometry_children_tile_the_parent():
-    from lss_kernels.hierarchy import level_geometry
+    from lss_kernels.model.hierarchy import level_geometry
     for lev, child in zip(level_geometry(SIZES), (1,) + SIZES):
         covered = sorted(o - child // 2 + i for o in lev.offsets for i in range(child))
         assert covered == list(range(-(lev.size // 2), -(lev.size // 2) + lev.size))
@@ -87,7 +87,7 @@ def test_upward_sums_and_extremes_match_brute_force(hierarchy):
 
 
 def test_column_spans_cover_every_reach_in_whole_blocks():
-    from lss_kernels.hierarchy import column_spans, level_geometry
+    from lss_kernels.model.hierarchy import column_spans, level_geometry
     levels = level_geometry(SIZES)
     # one pixel per block: exactly the levels' margins
     assert column_spans(levels, W, 1) == [(lev.margin, W + lev.margin) for lev in levels]
@@ -111,7 +111,7 @@ def test_hierarchy_in_one_pixel_blocks_matches_eight(pair, monkeypatch):
     lanes differently from a scalar one).  The blocks of 8 are checked against the
     reference in the tests around."""
     from lss_kernels.kernels import lanes as lanes_module
-    from lss_kernels.hierarchy import PatchHierarchy
+    from lss_kernels.model.hierarchy import PatchHierarchy
     rng = np.random.default_rng(9)
     D = rng.random((H, W)) * C
     phi, phi_plus = _smooth_phi(rng), _smooth_phi(rng, 4.0)
@@ -265,7 +265,7 @@ def test_first_iteration_messages_ignore_prior_and_validity(hierarchy):
 
 def test_cached_candidates_are_dropped_when_the_costs_change(pair):
     """Same beta, new image pair: the cached candidates must not survive."""
-    from lss_kernels.hierarchy import PatchHierarchy
+    from lss_kernels.model.hierarchy import PatchHierarchy
     pool = FieldPool()
     h = PatchHierarchy(pool, H, W, C, SIZES)
     lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
@@ -294,7 +294,7 @@ def test_cached_candidates_are_dropped_when_the_costs_change(pair):
 
 def test_integer_messages_without_subpixel_refinement(pair):
     """``subpixel=False`` is the release's integer argmin (Eq. 5 over c = 1 .. c_max)."""
-    from lss_kernels.hierarchy import PatchHierarchy
+    from lss_kernels.model.hierarchy import PatchHierarchy
     pool = FieldPool()
     h = PatchHierarchy(pool, H, W, C, SIZES, subpixel=False)
     lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
@@ -310,7 +310,7 @@ def test_integer_messages_without_subpixel_refinement(pair):
 
 
 def test_normal_equation_reduction_matches_lstsq(ti_arch):
-    from lss_kernels.shapes import GlobalShapes, WeightPlanes, basis, to_pixel_coefficients
+    from lss_kernels.model.shapes import GlobalShapes, WeightPlanes, basis, to_pixel_coefficients
     rng = np.random.default_rng(7)
     h, w = 41, 57   # several tiles, ragged edges
     pool = FieldPool()
@@ -336,7 +336,7 @@ def test_normal_equation_reduction_matches_lstsq(ti_arch):
 
 
 def test_shape_keeps_previous_value_with_too_few_rows(ti_arch):
-    from lss_kernels.shapes import GlobalShapes, WeightPlanes
+    from lss_kernels.model.shapes import GlobalShapes, WeightPlanes
     pool = FieldPool()
     shapes = GlobalShapes(pool, 8, 8)
     wf, wb, t = (pool.field(ti.f32, (8, 8)) for _ in range(3))
@@ -391,7 +391,7 @@ def test_field_pool_zero_restores_fresh_fields(ti_arch):
 
 @pytest.fixture(scope="module")
 def levelset(ti_arch):
-    from lss_kernels.levelset import LevelSet
+    from lss_kernels.model.levelset import LevelSet
     pool = FieldPool()
     ls = LevelSet(pool, H, W, Params())
     pool.finalize()
@@ -444,7 +444,7 @@ def _tree_medians(node, held, sorted_column, load, medians):
 
 @pytest.mark.parametrize("k", [3, 5, 7])
 def test_median_network_selects_the_medians_of_a_tile_of_windows(k):
-    from lss_kernels.levelset import _merge_network, median_network
+    from lss_kernels.model.levelset import _merge_network, median_network
     column_ops, tile, root = median_network(k)
     half = k // 2
 
@@ -487,7 +487,7 @@ def test_median_filter_matches_numpy_for_odd_and_tiny_sizes(ti_arch, monkeypatch
                                                             height, width):
     """Rows in blocks of 8 (the CPU's; 13 rows end in a partial block) and of 1 (the GPUs')."""
     from lss_kernels.kernels import lanes as lanes_module
-    from lss_kernels.levelset import LevelSet
+    from lss_kernels.model.levelset import LevelSet
     monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
     pool = FieldPool()
     ls = LevelSet(pool, height, width, Params(median_size=k))
@@ -505,7 +505,7 @@ def test_median_filter_matches_numpy_for_odd_and_tiny_sizes(ti_arch, monkeypatch
 def test_median_counts_sign_flips_and_foreground(ti_arch, k):
     """``median(src, dst, count=True)``: besides dst = median(src), ``flipped`` counts the
     pixels whose sign differs from dst's previous content and ``area`` the pixels > 0."""
-    from lss_kernels.levelset import LevelSet
+    from lss_kernels.model.levelset import LevelSet
     pool = FieldPool()
     ls = LevelSet(pool, 9, 14, Params(median_size=k))
     pool.finalize()
@@ -556,7 +556,7 @@ def _compare_derivatives(ls, phi):
 
 def _check_derivatives_at_size(phi):
     """A fresh LevelSet of ``phi``'s size against the reference derivatives."""
-    from lss_kernels.levelset import LevelSet
+    from lss_kernels.model.levelset import LevelSet
     pool = FieldPool()
     ls = LevelSet(pool, *phi.shape, Params())
     pool.finalize()
@@ -607,11 +607,11 @@ def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
     (34) ends in a partial block of lanes; also with blocks of one pixel, the GPUs'
     layout.  B is a given map here (a stand-in for the boundary costs' ``b_at``)."""
     from lss_kernels.kernels import lanes as lanes_module
-    from lss_kernels.levelset import LevelSet
+    from lss_kernels.model.levelset import LevelSet
     if lanes is not None:
         monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
-    from lss_kernels.occlusion import OcclusionGeometry
-    from lss_kernels.shapes import GlobalShapes
+    from lss_kernels.model.occlusion import OcclusionGeometry
+    from lss_kernels.model.shapes import GlobalShapes
     rng = np.random.default_rng(21)
     p = Params()
     pool = FieldPool()

@@ -12,8 +12,8 @@ X = np.broadcast_to(np.arange(W, dtype=np.float64), (H, W))
 
 @pytest.fixture(scope="module")
 def geometry(ti_arch):
-    from lss_kernels.occlusion import OcclusionGeometry
-    from lss_kernels.shapes import GlobalShapes, WeightPlanes
+    from lss_kernels.model.occlusion import OcclusionGeometry
+    from lss_kernels.model.shapes import GlobalShapes, WeightPlanes
     pool = FieldPool()
     occ = OcclusionGeometry(pool, H, W, C)
     shapes = GlobalShapes(pool, H, W)

@@ -134,7 +134,7 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     # CHUNK planes, rounded up to whole rows) and a 2-D distance map, and the distance
     # transforms' line buffers (3 arrays of lines x longest axis): phi's (all lines of the
     # longest axis), B_occ's and B_mono's (~4 planes of elements)
-    from lss_kernels.costs import CHUNK
+    from lss_kernels.model.costs import CHUNK
     chunk = (min(CHUNK, solver.c_max) + 1) * H * W * 4
     longest = max(H, W, solver.c_max)
     lines = 3 * 4 * (max(H, W) * (max(H, W) + 1) + 2 * (4 * H * W + 2 * longest))
@@ -204,7 +204,7 @@ def test_boundary_costs_match_a_numpy_reference(ti_arch):
     edges.  Both against numpy + scipy's exact EDT."""
     import math
     from scipy import ndimage
-    from lss_kernels.costs import gaussian_taps
+    from lss_kernels.model.costs import gaussian_taps
     scene = make_scene("tiny", seed=2)
     params = Params(max_iterations=1)
     solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=params)

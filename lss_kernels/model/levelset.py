@@ -22,9 +22,9 @@ import math
 import numpy as np
 import taichi as ti
 
-from .kernels import lanes
+from ..kernels import lanes
 from .costs import gaussian_taps
-from .kernels.distance import INF, DistanceTransform
+from ..kernels.distance import INF, DistanceTransform
 
 __all__ = ["LevelSet", "median_network"]
 

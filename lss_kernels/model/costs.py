@@ -1,6 +1,6 @@
 """Boundary costs B_occ and B_mono (Sec. 4) and their combination B (Eq. 1).
 
-The matching cost M and its patch levels live in :mod:`lss_kernels.hierarchy` (they are the
+The matching cost M and its patch levels live in :mod:`lss_kernels.model.hierarchy` (they are the
 upward pass's first product).  Here:
 
 * ``B_occ(x, y, c)``: small where the matching cost changes abruptly along the epipolar line:
@@ -20,8 +20,8 @@ import math
 import numpy as np
 import taichi as ti
 
-from .kernels.backend import ROWS_DISPARITIES_COLUMNS
-from .kernels.distance import INF, DistanceTransform
+from ..kernels.backend import ROWS_DISPARITIES_COLUMNS
+from ..kernels.distance import INF, DistanceTransform
 
 __all__ = ["BoundaryCosts", "gaussian_taps"]
 

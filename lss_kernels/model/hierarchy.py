@@ -28,8 +28,8 @@ to whole blocks (:func:`column_spans`).
 import numpy as np
 import taichi as ti
 
-from .kernels import lanes
-from .kernels.backend import ROWS_DISPARITIES_COLUMNS
+from ..kernels import lanes
+from ..kernels.backend import ROWS_DISPARITIES_COLUMNS
 
 __all__ = ["Level", "PatchHierarchy", "level_geometry"]
 

@@ -24,7 +24,7 @@ with two layers: the foreground is always in front).
 """
 import taichi as ti
 
-from .kernels import lanes
+from ..kernels import lanes
 
 __all__ = ["OcclusionGeometry"]
 
