@@ -4,7 +4,7 @@ Times one solver iteration stage by stage (``Solver(..., profile=True)``) on syn
 textured two-plane pairs, across image size, disparity range and CPU thread count; separates
 set-up (cost volumes, B_occ, edge maps) and Taichi's compile time (the extra time of a warm-up
 iteration); fits the scaling exponent of every stage against pixels x disparities; compares
-with the numpy specification of one iteration (:mod:`lss_kernels.numpy_iteration`) at
+with the numpy specification of one iteration (:mod:`lss_kernels.reference.iteration`) at
 400x300 with 64 disparities; and measures the memory bandwidth (a numpy copy on the CPU, a
 Taichi copy kernel in device memory on a GPU) to say how close an iteration comes to streaming
 its patch-cost volumes once.
@@ -192,7 +192,7 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
     estimate because the noise here only ever adds time (other load, a slower core).
     """
     import taichi as ti
-    from . import numpy_iteration as npi
+    from .reference import iteration as npi
     from .model.costs import gaussian_taps
     from .params import Params
     from .solver import Solver

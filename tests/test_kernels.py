@@ -1,9 +1,9 @@
-"""Each kernel against its small, readable numpy reference (lss_kernels.reference)."""
+"""Each kernel against its small, readable numpy reference (lss_kernels.reference.kernels)."""
 import numpy as np
 import pytest
 import taichi as ti
 
-from lss_kernels import reference as ref
+from lss_kernels.reference import kernels as ref
 from lss_kernels.kernels.backend import FieldPool
 from lss_kernels.params import Params
 

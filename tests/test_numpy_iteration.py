@@ -13,7 +13,7 @@ largest coefficient.  The consensus is a sum of float32 reciprocals: precision r
 import numpy as np
 import pytest
 
-from lss_kernels import numpy_iteration as npi
+from lss_kernels.reference import iteration as npi
 from lss_kernels.bench import synthetic_pair
 from lss_kernels.params import Params
 

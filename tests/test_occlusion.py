@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from lss_kernels import reference as ref
+from lss_kernels.reference import kernels as ref
 from lss_kernels.kernels.backend import FieldPool
 
 H, W, C = 12, 64, 16

@@ -53,8 +53,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .model.costs import gaussian_taps
-from .reference import patch_messages
+from ..model.costs import gaussian_taps
+from .kernels import patch_messages
 
 __all__ = ["IterationState", "STAGES", "iteration", "run", "state_from_solver"]
 
