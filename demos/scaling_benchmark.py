@@ -10,7 +10,7 @@ if "--json" in sys.argv:
     # keep stdout to the one JSON object: no Taichi banner on import
     os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
 
-from lss_kernels.bench import main  # noqa: E402
+from lss_kernels.apps.bench import main  # noqa: E402
 
 if __name__ == "__main__":
     sys.exit(main())

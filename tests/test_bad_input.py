@@ -4,7 +4,7 @@ traceback); gray, RGBA and 16-bit images are accepted and converted.
 
 API cases go through :func:`lss_kernels.validate.check_inputs` (what ``Solver`` calls before it
 allocates anything) or ``Solver`` itself; CLI cases run ``lss solve`` through
-:func:`lss_kernels.cli.main` and check exit status 2, one line on stderr and no ``--out``.
+:func:`lss_kernels.apps.cli.main` and check exit status 2, one line on stderr and no ``--out``.
 """
 import re
 import struct
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from lss_kernels import Params, Solver
-from lss_kernels.cli import main
+from lss_kernels.apps.cli import main
 from lss_kernels.io import read_image
 from lss_kernels.validate import check_init, check_inputs, parse_init
 

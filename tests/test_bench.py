@@ -62,7 +62,7 @@ def test_cli_json_keeps_stdout_to_one_json_object(tmp_path):
     import subprocess
     import sys
     code = ("import sys; sys.argv = ['lss', 'bench', '--json', '--in-process'];"
-            "import lss_kernels.cli as cli, lss_kernels.bench as b;"
+            "import lss_kernels.apps.cli as cli, lss_kernels.apps.bench as b;"
             "b.run_benchmark = lambda **k: {'stub': True}; b.summary = lambda r: r;"
             "sys.exit(cli.main(sys.argv[1:]))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

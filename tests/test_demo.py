@@ -1,4 +1,4 @@
-"""Tests of lss_kernels.demo: argument parsing (no Taichi) and one end-to-end run of
+"""Tests of lss_kernels.apps.demo: argument parsing (no Taichi) and one end-to-end run of
 ``lss demo`` on the tiny built-in scene (frames, a decodable looping GIF, patch.png)."""
 import argparse
 import os

@@ -7,8 +7,8 @@ import sys
 
 import pytest
 
-from lss_kernels.baselines import OPENCV_MISSING
-from lss_kernels.evaluate import COLUMNS, METHOD_NAMES, add_cli, run_eval
+from lss_kernels.apps.baselines import OPENCV_MISSING
+from lss_kernels.apps.evaluate import COLUMNS, METHOD_NAMES, add_cli, run_eval
 from lss_kernels.io import save_scene
 from lss_kernels.params import Params
 from lss_kernels.scenes import make_scene

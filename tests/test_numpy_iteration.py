@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from lss_kernels.reference import iteration as npi
-from lss_kernels.bench import synthetic_pair
+from lss_kernels.apps.bench import synthetic_pair
 from lss_kernels.params import Params
 
 H, W, D_MAX = 40, 56, 16

@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from lss_kernels import Params, solve
-from lss_kernels.cli import main
+from lss_kernels.apps.cli import main
 from lss_kernels.io import read_image, read_pfm, write_pfm
 from lss_kernels.metrics import score_arrays
 from lss_kernels.scenes import make_scene

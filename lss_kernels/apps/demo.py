@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from . import viz
+from .. import viz
 
 __all__ = ["run_demo", "add_cli", "main_demo", "parse_init", "parse_patch", "default_patch",
            "recorded_iterations"]
@@ -43,7 +43,7 @@ def parse_init(text: str, shape=None):
     """Parse ``--init`` (``ellipse:CX,CY,RX,RY`` or a mask PNG) with
     :func:`lss_kernels.validate.parse_init` and, given the image ``shape``, check it against
     the image with :func:`lss_kernels.validate.check_init`."""
-    from .validate import check_init, parse_init as parse
+    from ..validate import check_init, parse_init as parse
     if text is None:
         raise ValueError("--init: required with LEFT RIGHT (ellipse:CX,CY,RX,RY or a mask PNG)")
     init = parse(text)
@@ -100,7 +100,7 @@ def default_patch(phi0: np.ndarray, n_levels: int, patch_sizes=None):
 def _scores(snapshot, scene):
     if scene is None or getattr(scene, "disp_left", None) is None:
         return None
-    from . import metrics
+    from .. import metrics
     return metrics.score(snapshot["disparity"], snapshot["occlusion"], scene)
 
 
@@ -141,7 +141,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
     """
     import imageio.v3 as iio
 
-    from . import Params, Solver
+    from .. import Params, Solver
 
     every = int(every)
     if every < 1:
@@ -242,7 +242,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
 
 def add_cli(subparsers):
     """Register the ``demo`` sub-command on an ``argparse`` sub-parsers object."""
-    from .kernels.backend import ARCHES
+    from ..kernels.backend import ARCHES
     p = subparsers.add_parser(
         "demo", help="watch the solver evolve (frames, GIF, a patch's message; paper Fig. 1)",
         description="Run the solver on a built-in scene, a scene folder or a stereo pair and "
@@ -292,7 +292,7 @@ def main_demo(args) -> int:
             for path in images:
                 if not os.path.isfile(path):
                     raise ValueError(f"no such image file: {path!r}")
-            from .io import read_image
+            from ..io import read_image
             left, right = read_image(images[0], 'left'), read_image(images[1], 'right')
             if left.shape != right.shape:
                 raise ValueError(f"the images differ in size: {left.shape[1]}x{left.shape[0]} "
@@ -301,12 +301,12 @@ def main_demo(args) -> int:
             d_max = float(args.dmax)
         else:
             if args.scene:
-                from . import io
+                from .. import io
                 if not os.path.isdir(args.scene):
                     raise ValueError(f"--scene: no such folder {args.scene!r}")
                 scene = io.load_scene(args.scene)
             else:
-                from . import scenes
+                from .. import scenes
                 scene = scenes.make_scene(args.preset)
             left, right = scene.left, scene.right
             d_max = float(args.dmax) if args.dmax is not None else float(scene.d_max)
@@ -319,7 +319,7 @@ def main_demo(args) -> int:
     except (ValueError, KeyError, FileNotFoundError) as exc:
         return _fail(str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc))
 
-    from .kernels import backend
+    from ..kernels import backend
     arch = backend.init(arch=args.arch)
     if not args.quiet:
         print(f"lss demo: {left.shape[1]}x{left.shape[0]}, d_max {d_max:g}, arch {arch}, "

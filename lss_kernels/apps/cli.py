@@ -21,8 +21,8 @@ if "--json" in sys.argv[1:]:
     # stdout carries one JSON object: no Taichi banner when backend imports Taichi
     os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
 
-from . import __version__  # noqa: E402
-from .kernels.backend import ARCHES  # noqa: E402
+from .. import __version__  # noqa: E402
+from ..kernels.backend import ARCHES  # noqa: E402
 
 __all__ = ["main"]
 
@@ -59,7 +59,7 @@ def _add_solve(subparsers):
 
 
 def _params(args):
-    from .params import Params
+    from ..params import Params
     defaults = Params()
     changes = {}
     for item in args.param:
@@ -85,12 +85,12 @@ def _params(args):
 
 def _inputs(args):
     """(left, right, d_max, init, init_frame, scene) from the solve/demo arguments."""
-    from .validate import parse_init
+    from ..validate import parse_init
     if sum(map(bool, (args.scene, args.images, args.preset))) > 1:
         raise CliError("give one of --scene DIR, --preset NAME or LEFT RIGHT")
     if args.scene or args.preset:
-        from .io import load_scene
-        from .scenes import make_scene
+        from ..io import load_scene
+        from ..scenes import make_scene
         scene = load_scene(args.scene) if args.scene else make_scene(args.preset)
         d_max = args.dmax if args.dmax is not None else scene.d_max
         if args.init:
@@ -139,7 +139,7 @@ class Progress:
 def write_outputs(out_dir, result, left, params, extra=None):
     """Write the result files into ``out_dir`` atomically (temporary folder, then rename)."""
     import numpy as np
-    from . import io, viz
+    from .. import io, viz
     parent = os.path.dirname(os.path.abspath(out_dir)) or "."
     os.makedirs(parent, exist_ok=True)
     tmp = tempfile.mkdtemp(prefix=".lss-", dir=parent)
@@ -172,8 +172,8 @@ def write_outputs(out_dir, result, left, params, extra=None):
 
 
 def main_solve(args):
-    from .kernels import backend
-    from .solver import Solver
+    from ..kernels import backend
+    from ..solver import Solver
     params = _params(args)
     left, right, d_max, init, init_frame, scene = _inputs(args)
     backend.init(arch=args.arch, threads=args.threads)
@@ -189,7 +189,7 @@ def main_solve(args):
     extra = {"wall_seconds": round(time.perf_counter() - t0, 3), "d_max": float(d_max),
              "arch": args.arch}
     if scene is not None and scene.disp_left is not None and scene.occ_left is not None:
-        from .metrics import score
+        from ..metrics import score
         extra["score"] = {k: (float(v) if hasattr(v, "__float__") else v)
                           for k, v in score(result.disparity, result.occlusion, scene).items()}
     summary = write_outputs(args.out, result, left_img, params, extra)
@@ -211,7 +211,7 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_solve(sub)
     for name in SUBCOMMAND_MODULES:
-        module = importlib.import_module(f"lss_kernels.{name}")
+        module = importlib.import_module(f"lss_kernels.apps.{name}")
         module.add_cli(sub)
     return parser
 

@@ -17,7 +17,7 @@ resumed) unless ``force`` is set.  ``results.csv``, ``table.md`` and the panels 
 methods of the latest call (a panel is redrawn when one of its runs was recomputed or it is
 missing).  Methods: ``lss`` (this package's solver, initialised with the
 scene's cyclopean ellipse when it has one, the authors' own initialisation, else its left-view
-ellipse) and the OpenCV peers of :mod:`lss_kernels.baselines` (``sgm``, ``bm-lr``).
+ellipse) and the OpenCV peers of :mod:`lss_kernels.apps.baselines` (``sgm``, ``bm-lr``).
 """
 from __future__ import annotations
 
@@ -33,10 +33,10 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from . import io, metrics
+from .. import io, metrics
 from .baselines import METHODS as BASELINES, require_opencv
-from .params import c_max
-from .stopping import StopRule, replay
+from ..params import c_max
+from ..stopping import StopRule, replay
 
 __all__ = ["COLUMNS", "METHOD_NAMES", "add_cli", "main_eval", "run_eval"]
 
@@ -54,7 +54,7 @@ _MEANS = ("occ_f1", "occ_precision", "occ_recall", "bad4", "seconds")
 def _init_worker(arch: str, threads: int, methods) -> None:
     """Per-process set-up: Taichi for the solver, OpenCV's thread count for the peers."""
     if "lss" in methods:
-        from .kernels import backend
+        from ..kernels import backend
         backend.init(arch=arch, threads=threads)
     if any(m in BASELINES for m in methods):
         require_opencv().setNumThreads(threads)
@@ -71,7 +71,7 @@ def _solve(scene: io.Scene, params, trace: bool = False, restart: bool = False):
     at the end of every stop window and at the last iteration; with ``restart``, start
     Taichi again before building a new solver (see :func:`lss_kernels.kernels.backend.restart`).
     Returns the result, the trace rows and the seconds spent scoring them."""
-    from .solver import Solver
+    from ..solver import Solver
     if scene.init_ellipse_cyclopean is not None:
         init, frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
     else:
@@ -81,7 +81,7 @@ def _solve(scene: io.Scene, params, trace: bool = False, restart: bool = False):
     if solver is None:
         _release_solver()
         if restart:
-            from .kernels import backend
+            from ..kernels import backend
             backend.restart()
         solver = Solver(scene.left, scene.right, scene.d_max, init, params=params,
                         init_frame=frame)
@@ -283,7 +283,7 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
             print(f"lss eval: {len(missing)} lss run(s) finished earlier without --trace are "
                   f"left out of convergence.md (use --force to trace them)", file=sys.stderr)
         if traced:
-            from .params import Params
+            from ..params import Params
             _write_convergence(out, traced, params if params is not None else Params(),
                                missing)
     return rows
@@ -295,7 +295,7 @@ def _execute(todo, methods, jobs: int, arch: str):
         return
     if jobs == 1:
         if "lss" in methods:
-            from .kernels import backend
+            from ..kernels import backend
             if backend.current_arch() != arch:
                 backend.init(arch=arch)
         try:
@@ -421,7 +421,7 @@ RULE_VARIANTS = ((1.0, 1.0), (1.0, 0.5), (1.5, 1.0), (1.5, 0.5), (2.5, 1.0), (5.
 def _write_convergence(out: Path, records, params, missing=()) -> None:
     """convergence.csv / .md / .png from the traces of ``lss`` runs (see ``run_eval``);
     ``missing``: the scenes whose lss run has no trace."""
-    from . import viz
+    from .. import viz
     keys = ("iteration", "moving_fraction", "fg_fraction", "occ_f1", "bad4")
     with open(out / "convergence.csv", "w", newline="") as f:
         writer = csv.writer(f)
@@ -482,7 +482,7 @@ def _write_convergence(out: Path, records, params, missing=()) -> None:
 
 def _write_panel(path: Path, scene_dir: Path, records, out: Path) -> None:
     """Left image, true disparity and each method's disparity with occlusions in dark blue."""
-    from . import viz
+    from .. import viz
     scene = io.load_scene(scene_dir)
     truth = np.asarray(scene.disp_left, dtype=np.float32)
     finite = truth[np.isfinite(truth)]
@@ -516,7 +516,7 @@ def _write_panel(path: Path, scene_dir: Path, records, out: Path) -> None:
 
 def add_cli(subparsers) -> None:
     """Register ``eval`` on an ``argparse`` sub-parsers object (handler: :func:`main_eval`)."""
-    from .kernels.backend import ARCHES
+    from ..kernels.backend import ARCHES
     p = subparsers.add_parser(
         "eval", help="run and score methods on a folder of scenes (the paper's Table 1)",
         description="Run each method on every scene folder of DATASET_DIR, score it with the "

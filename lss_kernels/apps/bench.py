@@ -192,10 +192,10 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
     estimate because the noise here only ever adds time (other load, a slower core).
     """
     import taichi as ti
-    from .reference import iteration as npi
-    from .model.costs import gaussian_taps
-    from .params import Params
-    from .solver import Solver
+    from ..reference import iteration as npi
+    from ..model.costs import gaussian_taps
+    from ..params import Params
+    from ..solver import Solver
     params = params if params is not None else Params(max_iterations=10 ** 6, stop_fraction=0.0)
     left, right, init = synthetic_pair(width, height, d_max, seed)
     t = time.perf_counter()
@@ -241,17 +241,17 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
         out["block_numpy"] = [sum(b.values()) for b in numpy_blocks]
         out["numpy_iterations"] = m
     out["maxrss_bytes"] = _maxrss_bytes()
-    from .kernels import backend
+    from ..kernels import backend
     if backend.current_arch() not in (None, "cpu"):
         out["bandwidth_gbs"] = device_bandwidth()   # after the RSS reading: it allocates
     return out
 
 
 def _worker(argv=None):
-    """``python -c 'from lss_kernels.bench import _worker; _worker()' JSON``: one configuration
+    """``python -c 'from lss_kernels.apps.bench import _worker; _worker()' JSON``: one configuration
     in a fresh process (its own Taichi init, thread count and peak RSS); prints one line
     ``BENCH_RESULT {...}``."""
-    from .kernels import backend
+    from ..kernels import backend
     cfg = json.loads((argv or sys.argv[1:])[0])
     backend.init(arch=cfg["arch"], threads=cfg.get("threads"),
                  offline_cache=cfg.get("offline_cache", True))
@@ -264,7 +264,7 @@ def _run_isolated(cfg, timeout=900):
     env = dict(os.environ)
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
-    code = "from lss_kernels.bench import _worker; _worker()"
+    code = "from lss_kernels.apps.bench import _worker; _worker()"
     proc = subprocess.run([sys.executable, "-c", code, json.dumps(cfg)], capture_output=True,
                           text=True, env=env, timeout=timeout)
     for line in proc.stdout.splitlines():
@@ -595,7 +595,7 @@ def add_cli(subparsers):
 
 def main_bench(args) -> int:
     """Entry point of ``lss bench`` (``args`` from :func:`add_cli`)."""
-    from .kernels import backend
+    from ..kernels import backend
     threads = args.threads or [None]
     if any(t is not None and t < 1 for t in threads):
         raise ValueError(f"--threads: expected positive integers, got {threads}")
@@ -617,7 +617,7 @@ def main_bench(args) -> int:
 
 
 def main(argv=None) -> int:
-    """``python -m lss_kernels.bench`` / ``demos/scaling_benchmark.py``."""
+    """``python -m lss_kernels.apps.bench`` / ``demos/scaling_benchmark.py``."""
     p = _configure(argparse.ArgumentParser(prog="lss bench",
                                            description=__doc__.split("\n\n")[0]))
     return main_bench(p.parse_args(argv))
