@@ -30,7 +30,8 @@ import time
 
 import numpy as np
 
-from lss_kernels import backend, viz
+from lss_kernels import viz
+from lss_kernels.kernels import backend
 
 WIDTH = 400      # pixels of every stage figure
 FONT = 7

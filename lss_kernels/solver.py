@@ -126,7 +126,6 @@ class Solver:
         self.shapes = GlobalShapes(pool, H, W)
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, self.params)
-        self.D = pool.field(ti.f32, (H, W))
         pool.finalize()
         self.levelset.setup()
         self.costs.setup(self.levelset.distance, self.levelset.distance_map)
@@ -168,7 +167,7 @@ class Solver:
         self.timings.update({s: 0.0 for s in STAGES})
 
         self.initial_mask = self._initial_mask(init, init_frame)
-        self.levelset.set_from_mask(self.initial_mask)
+        self.levelset.start(self.initial_mask, self.c_max)
         self.iteration = 0
         self.done = False
         self.stop_reason = None
@@ -253,7 +252,7 @@ class Solver:
         ls.derivatives()
         self.occ.refresh_phi_plus(ls.phi)
         if not first:
-            hier.upward(self.D, ls.phi, self.occ.phi_plus)
+            hier.upward(ls.D, ls.phi, self.occ.phi_plus)
         t = self._stage("upward", t)
         hier.messages(p.beta / self.c_max, not first, not first)
         t = self._stage("messages", t)
@@ -267,7 +266,7 @@ class Solver:
         t = self._stage("boundary", t)
         reinit = self.iteration % p.reinit_every == 0
         # the median's last pass also writes D (Eq. 3) from the new phi
-        ls.evolve(hier.cost[0], self.c_max, self.shapes, self.occ, p, reinit, self.D)
+        ls.evolve(hier.cost[0], self.c_max, self.shapes, self.occ, p, reinit)
         t = self._stage("levelset", t)
         flipped = int(ls.flipped[None])
         area = int(ls.area[None])
@@ -334,7 +333,7 @@ class Solver:
         return dict(phi=self.levelset.phi.to_numpy(), consensus_mean=mean,
                     consensus_sigma=sigma, disparity=disparity, occlusion=occlusion,
                     foreground=foreground, initial_foreground=self.initial_foreground_left(),
-                    D=2.0 * self.D.to_numpy())
+                    D=2.0 * self.levelset.D.to_numpy())
 
     def initial_foreground_left(self):
         """The initial foreground in the left view."""

@@ -19,5 +19,5 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture(scope="session")
 def ti_arch(request):
-    from lss_kernels import backend
+    from lss_kernels.kernels import backend
     return backend.init(arch=request.config.getoption("--arch"))

@@ -104,7 +104,7 @@ def test_pool_field_in_another_memory_order_keeps_its_indexing(ti_arch):
 CACHE_SCRIPT = r"""
 import json, sys
 from pathlib import Path
-from lss_kernels import backend
+from lss_kernels.kernels import backend
 from lss_kernels.params import Params
 from lss_kernels.scenes import make_scene
 from lss_kernels.solver import Solver

@@ -401,12 +401,29 @@ def levelset(ti_arch):
     pool.destroy()
 
 
-def test_median_filter_matches_numpy(levelset):
+def _median_of(a, k, lanes=None, monkeypatch=None):
+    """:class:`MedianFilter` of ``a`` (``k`` by ``k``) through the plain sink."""
+    from lss_kernels.kernels import lanes as lanes_module
+    from lss_kernels.kernels.median import Assign, MedianFilter
+    if lanes is not None:
+        monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
+    pool = FieldPool()
+    median = MedianFilter(pool, *a.shape, k)
+    src = pool.field(ti.f32, a.shape)
+    dst = pool.field(ti.f32, a.shape)
+    pool.finalize()
+    assert median.lanes == (lanes or lanes_module.lanes_for_arch())
+    src.from_numpy(a.astype(np.float32))
+    median.run(src, Assign(dst))
+    out = dst.to_numpy()
+    pool.destroy()
+    return out
+
+
+def test_median_filter_matches_numpy(ti_arch):
     rng = np.random.default_rng(9)
     a = rng.standard_normal((H, W)).astype(np.float32)
-    levelset.phi_next.from_numpy(a)
-    levelset.median(levelset.phi_next, levelset.phi)
-    np.testing.assert_array_equal(levelset.phi.to_numpy(), ref.median_filter(a, 7))
+    np.testing.assert_array_equal(_median_of(a, 7), ref.median_filter(a, 7))
 
 
 def _run_ops(v, ops):
@@ -444,7 +461,7 @@ def _tree_medians(node, held, sorted_column, load, medians):
 
 @pytest.mark.parametrize("k", [3, 5, 7])
 def test_median_network_selects_the_medians_of_a_tile_of_windows(k):
-    from lss_kernels.model.levelset import _merge_network, median_network
+    from lss_kernels.kernels.median import _merge_network, median_network
     column_ops, tile, root = median_network(k)
     half = k // 2
 
@@ -486,48 +503,48 @@ def test_median_network_selects_the_medians_of_a_tile_of_windows(k):
 def test_median_filter_matches_numpy_for_odd_and_tiny_sizes(ti_arch, monkeypatch, lanes, k,
                                                             height, width):
     """Rows in blocks of 8 (the CPU's; 13 rows end in a partial block) and of 1 (the GPUs')."""
-    from lss_kernels.kernels import lanes as lanes_module
-    from lss_kernels.model.levelset import LevelSet
-    monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
-    pool = FieldPool()
-    ls = LevelSet(pool, height, width, Params(median_size=k))
-    pool.finalize()
-    assert ls.lanes == lanes
     rng = np.random.default_rng(k * 100 + width)
     a = np.round(rng.standard_normal((height, width)) * 2).astype(np.float32)
-    ls.phi_next.from_numpy(a)
-    ls.median(ls.phi_next, ls.phi)
-    np.testing.assert_array_equal(ls.phi.to_numpy(), ref.median_filter(a, k))
-    pool.destroy()
+    np.testing.assert_array_equal(_median_of(a, k, lanes, monkeypatch), ref.median_filter(a, k))
 
 
 @pytest.mark.parametrize("k", [1, 7])
-def test_median_counts_sign_flips_and_foreground(ti_arch, k):
-    """``median(src, dst, count=True)``: besides dst = median(src), ``flipped`` counts the
-    pixels whose sign differs from dst's previous content and ``area`` the pixels > 0."""
+def test_settle_counts_sign_flips_and_writes_eq3(ti_arch, k):
+    """``LevelSet.settle``: phi = median(phi_next); ``flipped`` counts the pixels whose sign
+    differs from phi's previous content, ``area`` the pixels > 0, and D is Eq. 3 of the new
+    phi (Theta_1 where phi > 0, else Theta_2), clamped to [0, c_max]."""
     from lss_kernels.model.levelset import LevelSet
+    from lss_kernels.model.shapes import GlobalShapes
     pool = FieldPool()
     ls = LevelSet(pool, 9, 14, Params(median_size=k))
+    shapes = GlobalShapes(pool, 9, 14)
     pool.finalize()
     rng = np.random.default_rng(30 + k)
     before = rng.standard_normal((9, 14)).astype(np.float32)
     src = rng.standard_normal((9, 14)).astype(np.float32)
+    theta = np.array([[0.0, 0.0, 0.0, 3.0, 0.0, 5.0], [0.0, 0.0, 0.0, 0.0, 3.0, 0.0]])
+    shapes.set(theta[0], theta[1])
+    ls.d_limit[None] = 6.5
     ls.phi.from_numpy(before)
     ls.phi_next.from_numpy(src)
-    ls.median(ls.phi_next, ls.phi, count=True)
+    ls.settle(shapes)
     after = ref.median_filter(src, k) if k > 1 else src
     np.testing.assert_array_equal(ls.phi.to_numpy(), after)
     assert ls.flipped[None] == ((after > 0) != (before > 0)).sum() > 0
     assert ls.area[None] == (after > 0).sum() > 0
+    y, x = np.mgrid[0:9, 0:14].astype(np.float64)
+    xn, yn = (x - shapes.cx) * shapes.inv_s, (y - shapes.cy) * shapes.inv_s
+    th1, th2 = 3.0 * xn + 5.0, 3.0 * yn
+    want = np.clip(np.where(after > 0, th1, th2), 0.0, 6.5)
+    assert (want == 6.5).any() and (want == 0.0).any()     # both clamps are exercised
+    np.testing.assert_allclose(ls.D.to_numpy(), want, atol=1e-5)
     pool.destroy()
 
 
-def test_median_filter_matches_numpy_with_ties_and_borders(levelset):
+def test_median_filter_matches_numpy_with_ties_and_borders(ti_arch):
     rng = np.random.default_rng(12)
     a = np.round(rng.standard_normal((H, W)) * 2).astype(np.float32)
-    levelset.phi_next.from_numpy(a)
-    levelset.median(levelset.phi_next, levelset.phi)
-    np.testing.assert_array_equal(levelset.phi.to_numpy(), ref.median_filter(a, 7))
+    np.testing.assert_array_equal(_median_of(a, 7), ref.median_filter(a, 7))
 
 
 def test_derivatives_and_curvature_match_reference(levelset):
@@ -671,7 +688,7 @@ def test_curvature_of_a_disc_is_minus_one_over_radius(levelset):
 def test_reinitialise_gives_scaled_signed_distance(levelset):
     y, x = np.mgrid[0:H, 0:W]
     mask = (x >= 10) & (x < 25)                 # a vertical band: distance along x only
-    levelset.set_from_mask(mask)
+    levelset.start(mask, C)
     phi = levelset.phi.to_numpy()
     dist_in = np.minimum(x - 10, 24 - x) + 0.5
     dist_out = np.where(x < 10, 10 - x, x - 24) - 0.5

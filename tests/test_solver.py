@@ -204,7 +204,7 @@ def test_boundary_costs_match_a_numpy_reference(ti_arch):
     edges.  Both against numpy + scipy's exact EDT."""
     import math
     from scipy import ndimage
-    from lss_kernels.model.costs import gaussian_taps
+    from lss_kernels.kernels.filters import gaussian_taps
     scene = make_scene("tiny", seed=2)
     params = Params(max_iterations=1)
     solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=params)

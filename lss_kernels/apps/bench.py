@@ -193,7 +193,7 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
     """
     import taichi as ti
     from ..reference import iteration as npi
-    from ..model.costs import gaussian_taps
+    from ..kernels.filters import gaussian_taps
     from ..params import Params
     from ..solver import Solver
     params = params if params is not None else Params(max_iterations=10 ** 6, stop_fraction=0.0)

@@ -22,21 +22,9 @@ import taichi as ti
 
 from ..kernels.backend import ROWS_DISPARITIES_COLUMNS
 from ..kernels.distance import INF, DistanceTransform
+from ..kernels.filters import gaussian_taps
 
-__all__ = ["BoundaryCosts", "gaussian_taps"]
-
-
-def gaussian_taps(sigma, half_width=None):
-    """Sampled Gaussian ``g`` (sums to 1) and its first and second derivatives on
-    ``-half_width .. half_width`` (default ``ceil(3.5 sigma)``)."""
-    if half_width is None:
-        half_width = int(math.ceil(3.5 * sigma))
-    i = np.arange(-half_width, half_width + 1, dtype=np.float64)
-    g = np.exp(-i ** 2 / (2 * sigma ** 2))
-    g /= g.sum()
-    g1 = -i / sigma ** 2 * g
-    g2 = (i ** 2 / sigma ** 4 - 1 / sigma ** 2) * g
-    return g, g1, g2
+__all__ = ["BoundaryCosts"]
 
 
 #: B_occ is filtered in blocks of rows holding as many values as this many planes (its

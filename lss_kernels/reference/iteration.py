@@ -53,7 +53,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from ..model.costs import gaussian_taps
+from ..kernels.filters import gaussian_taps
 from .kernels import patch_messages
 
 __all__ = ["IterationState", "STAGES", "iteration", "run", "state_from_solver"]
@@ -114,7 +114,7 @@ def state_from_solver(solver) -> IterationState:
     return IterationState(
         costs=costs, b_occ=f64(solver.costs.b_occ), edge_left=f64(solver.costs.edge_left),
         edge_right=f64(solver.costs.edge_right), phi=f64(solver.levelset.phi),
-        D=f64(solver.D), delta_theta=f64(solver.occ.delta_theta),
+        D=f64(solver.levelset.D), delta_theta=f64(solver.occ.delta_theta),
         theta=f64(solver.shapes.theta), iteration=int(solver.iteration),
         extra=dict(consensus_mean=f64(h.consensus_mean), precision=prec,
                    phi_plus=f64(solver.occ.phi_plus)))

@@ -119,7 +119,7 @@ def median_filter(a, size):
 def gaussian_derivatives(phi, sigma):
     """phi_x, phi_y, phi_xx, phi_yy, phi_xy by separable Gaussian-derivative convolution
     (half-width ceil(3.5 sigma), symmetric borders)."""
-    from ..model.costs import gaussian_taps
+    from ..kernels.filters import gaussian_taps
     g = gaussian_taps(sigma)
     h = (len(g[0]) - 1) // 2
 
