@@ -117,7 +117,7 @@ def main(argv=None):
     ap.add_argument("--out", default=os.path.join("docs", "walkthrough"))
     ap.add_argument("--steps", type=int, default=40, help="phi steps shown in stage 6")
     ap.add_argument("--iterations", type=int, default=400, help="cap for the final stage")
-    ap.add_argument("--arch", default="auto", choices=backend.ARCHES)
+    ap.add_argument("--arch", default=backend.DEFAULT_ARCH, choices=backend.ARCHES)
     args = ap.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
 

@@ -153,3 +153,39 @@ def test_kernels_without_volumes_are_cached_across_search_ranges(tmp_path, ti_ar
     assert kernels(first) and new, "the second range should compile its volume kernels"
     assert len(new) <= len(kernels(first)) // 2, (len(new), len(kernels(first)))
     assert kernels(third) == kernels(second), "the first range again compiled anew"
+
+
+def test_auto_runs_on_the_cpu_with_one_line_when_no_gpu_answers(monkeypatch):
+    from lss_kernels.kernels import backend
+    monkeypatch.setattr(backend, "probe", lambda arch: (False, "no cuda driver library"))
+    said = []
+    assert backend.resolve("auto", log=said.append) == "cpu"
+    assert said == ["lss: no usable CUDA GPU (no cuda driver library); running on the CPU"]
+
+
+def test_auto_takes_cuda_when_a_device_answers(monkeypatch):
+    from lss_kernels.kernels import backend
+    monkeypatch.setattr(backend, "probe", lambda arch: (arch == "cuda", "ok"))
+    assert backend.resolve("auto", log=pytest.fail) == "cuda"
+    assert backend.resolve("cpu") == "cpu"
+
+
+def test_gpu_without_any_gpu_is_one_clear_error(monkeypatch):
+    from lss_kernels.kernels import backend
+    monkeypatch.setattr(backend, "probe", lambda arch: (False, f"no {arch} driver library"))
+    with pytest.raises(ValueError, match=r"^arch: 'gpu' found no usable GPU backend \(cuda: "
+                                         r"no cuda driver library; vulkan: .*\)$"):
+        backend.resolve("gpu")
+
+
+def test_probe_of_a_backend_the_machine_lacks_answers_instead_of_crashing(monkeypatch):
+    """The probe asks Taichi in a subprocess, even when the driver library seems present: a
+    backend that the machine lacks makes that process fail (or crash), never the caller."""
+    from lss_kernels.kernels import backend
+    lacks_cuda = not backend._library_present("cuda")
+    monkeypatch.setattr(backend, "_probed", {})
+    monkeypatch.setattr(backend, "_library_present", lambda arch: True)
+    usable, reason = backend.probe("cuda", timeout=120)
+    assert isinstance(usable, bool) and reason
+    if lacks_cuda:
+        assert not usable

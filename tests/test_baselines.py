@@ -5,7 +5,7 @@ import sys
 import numpy as np
 import pytest
 
-from lss_kernels import baselines
+from lss_kernels.apps import baselines
 from lss_kernels.apps.baselines import METHODS, OPENCV_MISSING, bm_lr, lr_check, sgm
 from lss_kernels.metrics import score
 from lss_kernels.scenes import make_scene

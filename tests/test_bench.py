@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from lss_kernels import bench
+from lss_kernels.apps import bench
 
 TINY = dict(sizes=[(56, 40)], size_d=16, disparities=[], disp_size=(56, 40),
             compare=(56, 40, 16), iterations=1, numpy_iterations=1)
@@ -101,4 +101,4 @@ def test_synthetic_pair_and_cli_registration():
     bench.add_cli(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["bench", "--quick", "--json", "--threads", "2", "1"])
     assert args.func is bench.main_bench and args.quick and args.json
-    assert args.threads == [2, 1] and args.arch == "cpu"
+    assert args.threads == [2, 1] and args.arch == "auto"      # every command: auto

@@ -7,7 +7,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from lss_kernels import demo
+from lss_kernels.apps import demo
 
 
 def _parser():
@@ -77,6 +77,29 @@ def test_cli_argument_errors_exit_2(tmp_path, capsys, argv, match):
     assert args.func(args) == 2
     err = capsys.readouterr().err.strip()
     assert match in err and len(err.splitlines()) == 1
+
+
+def test_lss_demo_with_no_arguments(tmp_path):
+    """``lss demo`` exactly as a new user types it, in a fresh process: the default arch
+    (``auto``) runs on the CPU where there is no GPU (CI's machine), with one line saying so,
+    and the default output folder gets the frames, the GIF and the pictures."""
+    import subprocess
+    import sys
+    from lss_kernels.kernels import backend
+    proc = subprocess.run([sys.executable, "-m", "lss_kernels.apps.cli", "demo"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    if not backend.probe("cuda")[0]:
+        assert "running on the CPU" in proc.stderr
+        assert "arch cpu" in proc.stdout
+    out = tmp_path / "lss_demo"
+    assert "iterations" in proc.stdout.strip().splitlines()[-1]
+    frames = sorted((out / "frames").glob("frame_*.png"))
+    assert len(frames) >= 2
+    first = iio.imread(frames[0])
+    gif = iio.imread(out / "evolution.gif", index=None)
+    assert gif.shape[0] == len(frames) and gif.shape[1:3] == first.shape[:2]
+    assert iio.imread(out / "patch.png").ndim == 3
 
 
 def test_demo_end_to_end_on_tiny_scene(ti_arch, tmp_path, capsys):

@@ -32,6 +32,8 @@ import time
 
 import numpy as np
 
+from ..kernels.backend import ARCHES, DEFAULT_ARCH
+
 __all__ = ["add_cli", "bandwidth", "fit_exponent", "main", "main_bench", "run_benchmark",
            "synthetic_pair"]
 
@@ -568,8 +570,9 @@ def summary(result):
 
 # ---------------------------------------------------------------------------- CLI
 def _configure(p):
-    p.add_argument("--arch", default="cpu", choices=("cpu", "cuda", "vulkan", "gpu", "auto"),
-                   help="Taichi arch (default: cpu)")
+    p.add_argument("--arch", default=DEFAULT_ARCH, metavar="ARCH",
+                   help=f"Taichi backend: {', '.join(ARCHES)} (default {DEFAULT_ARCH}: CUDA if a "
+                        f"device answers, else the CPU)")
     p.add_argument("--quick", action="store_true",
                    help="two small configurations and the numpy comparison")
     p.add_argument("--json", action="store_true",
@@ -605,9 +608,9 @@ def main_bench(args) -> int:
     # with --json, stdout carries the one JSON object: Taichi's "Starting on arch" line
     # goes to stderr
     with contextlib.redirect_stdout(sys.stderr) if args.json else contextlib.nullcontext():
-        backend.init(arch=args.arch, threads=threads[0], offline_cache=not args.cold)
+        arch = backend.init(arch=args.arch, threads=threads[0], offline_cache=not args.cold)
     log = (lambda *a: print(*a, file=sys.stderr, flush=True)) if args.json else print
-    result = run_benchmark(quick=args.quick, arch=args.arch, threads=threads, out=args.out,
+    result = run_benchmark(quick=args.quick, arch=arch, threads=threads, out=args.out,
                            log=log, isolate=not args.in_process, cold=args.cold)
     if args.json:
         print(json.dumps(summary(result), default=float))

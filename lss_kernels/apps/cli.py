@@ -22,7 +22,7 @@ if "--json" in sys.argv[1:]:
     os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
 
 from .. import __version__  # noqa: E402
-from ..kernels.backend import ARCHES  # noqa: E402
+from ..kernels.backend import ARCHES, DEFAULT_ARCH  # noqa: E402
 
 __all__ = ["main"]
 
@@ -48,8 +48,9 @@ def _add_solve(subparsers):
     p.add_argument("--init", metavar="SPEC", help="ellipse:CX,CY,RX,RY (left-view pixels) or "
                    "mask:PATH (8-bit PNG, 255 = foreground)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--arch", default="cpu", metavar="ARCH",
-                   help=f"Taichi backend: {', '.join(ARCHES)} (default cpu)")
+    p.add_argument("--arch", default=DEFAULT_ARCH, metavar="ARCH",
+                   help=f"Taichi backend: {', '.join(ARCHES)} (default {DEFAULT_ARCH}: CUDA if a "
+                        f"device answers, else the CPU)")
     p.add_argument("--threads", type=int, metavar="N", help="CPU threads (default: all)")
     p.add_argument("--max-iterations", type=int, metavar="N", help="iteration cap")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
@@ -176,7 +177,7 @@ def main_solve(args):
     from ..solver import Solver
     params = _params(args)
     left, right, d_max, init, init_frame, scene = _inputs(args)
-    backend.init(arch=args.arch, threads=args.threads)
+    arch = backend.init(arch=args.arch, threads=args.threads)
     t0 = time.perf_counter()
     solver = Solver(left, right, d_max, init, params=params, init_frame=init_frame)
     progress = Progress(params.max_iterations, args.quiet)
@@ -187,7 +188,7 @@ def main_solve(args):
     left_img = solver.left_image
     solver.close()
     extra = {"wall_seconds": round(time.perf_counter() - t0, 3), "d_max": float(d_max),
-             "arch": args.arch}
+             "arch": arch}
     if scene is not None and scene.disp_left is not None and scene.occ_left is not None:
         from ..metrics import score
         extra["score"] = {k: (float(v) if hasattr(v, "__float__") else v)

@@ -242,7 +242,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
 
 def add_cli(subparsers):
     """Register the ``demo`` sub-command on an ``argparse`` sub-parsers object."""
-    from ..kernels.backend import ARCHES
+    from ..kernels.backend import ARCHES, DEFAULT_ARCH
     p = subparsers.add_parser(
         "demo", help="watch the solver evolve (frames, GIF, a patch's message; paper Fig. 1)",
         description="Run the solver on a built-in scene, a scene folder or a stereo pair and "
@@ -258,7 +258,9 @@ def add_cli(subparsers):
     p.add_argument("--out", default="lss_demo", metavar="DIR", help="output folder")
     p.add_argument("--every", type=int, default=10, metavar="K",
                    help="record a frame every K iterations (default 10)")
-    p.add_argument("--arch", default="auto", choices=ARCHES, help="Taichi backend")
+    p.add_argument("--arch", default=DEFAULT_ARCH, metavar="ARCH",
+                   help=f"Taichi backend: {', '.join(ARCHES)} (default {DEFAULT_ARCH}: CUDA if a "
+                        f"device answers, else the CPU)")
     p.add_argument("--patch", metavar="X,Y,LEVEL",
                    help="patch of the Fig. 1(a) plot (cyclopean pixels, level index)")
     p.add_argument("--iterations", type=int, metavar="N", help="iteration cap")

@@ -516,7 +516,7 @@ def _write_panel(path: Path, scene_dir: Path, records, out: Path) -> None:
 
 def add_cli(subparsers) -> None:
     """Register ``eval`` on an ``argparse`` sub-parsers object (handler: :func:`main_eval`)."""
-    from ..kernels.backend import ARCHES
+    from ..kernels.backend import ARCHES, DEFAULT_ARCH
     p = subparsers.add_parser(
         "eval", help="run and score methods on a folder of scenes (the paper's Table 1)",
         description="Run each method on every scene folder of DATASET_DIR, score it with the "
@@ -529,8 +529,9 @@ def add_cli(subparsers) -> None:
     p.add_argument("--out", default="eval_out", help="output folder (default: %(default)s)")
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default: 1)")
     p.add_argument("--force", action="store_true", help="recompute finished runs")
-    p.add_argument("--arch", default="cpu", choices=ARCHES,
-                   help="Taichi arch for lss (default: %(default)s)")
+    p.add_argument("--arch", default=DEFAULT_ARCH, metavar="ARCH",
+                   help=f"Taichi backend for lss: {', '.join(ARCHES)} (default {DEFAULT_ARCH}: "
+                        f"CUDA if a device answers, else the CPU)")
     p.add_argument("--trace", action="store_true",
                    help="score lss at the end of every stop window; writes convergence.csv, "
                         ".md (with variants of the stopping rule replayed) and .png")

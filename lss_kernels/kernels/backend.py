@@ -4,15 +4,14 @@ The library never calls ``ti.init`` on import: entry points (the CLI, demos, ben
 pytest fixture) call :func:`init` once.  Kernels compiled by the solver are cached on disk by
 Taichi's offline cache so that a second run of the CLI skips most of the compile time.
 """
-import functools
 import os
-import types
 
 import taichi as ti
-from taichi.lang import kernel_impl as _kernel_impl
-from taichi.lang.ast import ast_transformer_utils as _ast_utils
+from . import taichi_patches
 
 ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu", "auto")
+#: What every command runs on unless told otherwise: CUDA if a device answers, else the CPU.
+DEFAULT_ARCH = "auto"
 
 _state = {"arch": None, "threads": None, "kwargs": None}
 
@@ -23,101 +22,94 @@ _state = {"arch": None, "threads": None, "kwargs": None}
 ROWS_DISPARITIES_COLUMNS = (0, 2, 1)
 
 
-def _resolve(arch: str):
+#: GPU backends that ``"gpu"`` tries, in order.
+GPU_ARCHES = ("cuda", "vulkan", "metal")
+
+_probed = {}
+
+
+def _library_present(arch: str) -> bool:
+    """Whether the driver library of a GPU backend can be loaded at all (a cheap first test:
+    without it, there is no device)."""
+    import ctypes
+    names = {"cuda": ("libcuda.so.1", "libcuda.so", "nvcuda.dll"),
+             "vulkan": ("libvulkan.so.1", "libvulkan.so", "vulkan-1.dll"),
+             "metal": ("/System/Library/Frameworks/Metal.framework/Metal",)}[arch]
+    for name in names:
+        try:
+            ctypes.CDLL(name)
+            return True
+        except OSError:
+            continue
+    return False
+
+
+def probe(arch: str, timeout: float = 60.0) -> tuple:
+    """Whether Taichi can start on the GPU backend ``arch``, tried in a short subprocess
+    (Taichi can crash the process that asks for a backend the machine lacks); the answer is
+    kept for the process.  Returns ``(usable, reason)``."""
+    if arch in _probed:
+        return _probed[arch]
+    if not _library_present(arch):
+        answer = (False, f"no {arch} driver library")
+    else:
+        import subprocess
+        import sys
+        code = (f"import taichi as ti; ti.init(arch=ti.{arch}, enable_fallback=False, "
+                f"offline_cache=False, log_level=ti.ERROR)")
+        env = dict(os.environ, ENABLE_TAICHI_HEADER_PRINT="0")
+        try:
+            run = subprocess.run([sys.executable, "-c", code], capture_output=True,
+                                 text=True, timeout=timeout, env=env)
+            lines = (run.stderr or "").strip().splitlines()
+            answer = (run.returncode == 0,
+                      "ok" if run.returncode == 0 else
+                      (lines[-1] if lines else f"exit status {run.returncode}"))
+        except subprocess.TimeoutExpired:
+            answer = (False, f"no answer from a {arch} start-up in {timeout:g} s")
+    _probed[arch] = answer
+    return answer
+
+
+def resolve(arch: str, log=None) -> str:
+    """The concrete backend for ``arch``: ``"auto"`` is CUDA when a CUDA device answers, else
+    the CPU (``log`` gets one line saying so); ``"gpu"`` is the first of
+    :data:`GPU_ARCHES` that answers (``ValueError`` if none); any other name is itself."""
     if arch == "auto":
-        return ti.gpu if _gpu_available() else ti.cpu
-    return getattr(ti, arch)
+        usable, reason = probe("cuda")
+        if usable:
+            return "cuda"
+        if log is not None:
+            log(f"lss: no usable CUDA GPU ({reason}); running on the CPU")
+        return "cpu"
+    if arch == "gpu":
+        reasons = []
+        for candidate in GPU_ARCHES:
+            usable, reason = probe(candidate)
+            if usable:
+                return candidate
+            reasons.append(f"{candidate}: {reason}")
+        raise ValueError(f"arch: 'gpu' found no usable GPU backend ({'; '.join(reasons)})")
+    return arch
 
 
-def _gpu_available() -> bool:
-    # Taichi falls back to the CPU on its own when asked for ti.gpu without one; we only use
-    # this to decide, so a missing GPU is never an error for arch="auto".
-    return os.environ.get("CUDA_VISIBLE_DEVICES", "0") != ""
-
-
-def _memoise_source_positions():
-    """Build each of Taichi's source-position strings once per process.
-
-    Taichi's front end formats a "File ..., line ..." string with the offending line and a
-    caret line (two ``textwrap`` calls) for every AST node it visits, before it knows whether
-    an error will need it, and it visits a node once per unrolled ``ti.static`` iteration and
-    once per kernel that inlines its ``ti.func``.  A 760x340 solve visits ~79,000 nodes at
-    ~6,000 distinct positions: ~2.5 s of every new solver's set-up (warm kernel cache) went
-    into these strings.  The string depends only on the function's source and the node's
-    position, so a cache returns Taichi's own text, unchanged (the kernels' debug info and
-    the offline-cache keys stay the same).  Skipped if this Taichi has no such method.
-    """
-    context = getattr(_ast_utils, "ASTTransformerContext", None)
-    build = getattr(context, "get_pos_info", None)
-    if build is None or getattr(build, "_lss_memoised", False):
-        return
-    cache = {}
-
-    def get_pos_info(self, node):
-        key = (self.file, self.func.func, self.lineno_offset, self.indent,
-               type(node).__name__, node.lineno, node.col_offset,
-               getattr(node, "end_lineno", None), getattr(node, "end_col_offset", None))
-        info = cache.get(key)
-        if info is None:
-            info = cache[key] = build(self, node)
-        return info
-
-    get_pos_info._lss_memoised = True
-    get_pos_info.original = build
-    context.get_pos_info = get_pos_info
-
-
-class _MemoisedTextwrap:
-    """The ``textwrap`` module as Taichi's kernel module sees it, with ``fill`` and
-    ``dedent`` remembered per argument (both are pure functions of their arguments)."""
-
-    def __init__(self, module):
-        self._module = module
-        self.fill = functools.lru_cache(maxsize=None)(module.fill)
-        self.dedent = functools.lru_cache(maxsize=None)(module.dedent)
-
-    def __getattr__(self, name):
-        return getattr(self._module, name)
-
-
-def _memoise_source_reading():
-    """Read each kernel's and ``ti.func``'s source once per process.
-
-    Before it parses a function, Taichi reads its source with ``inspect`` (which tokenises
-    the file's lines to find the function's end) and re-wraps every line with
-    ``textwrap.fill``, once per kernel instance and once per ``ti.func`` call site that it
-    inlines: ~1,000 times in a 760x340 solve, 0.54 s of the front end's 1.6 s (warm kernel
-    cache).  The source of a function does not change while the process runs, so the first
-    answer is kept; Taichi still parses a fresh tree every time (it annotates the tree as it
-    goes).  Skipped if this Taichi reads sources otherwise.
-    """
-    read = getattr(_kernel_impl, "getsourcelines", None)
-    if read is None or getattr(read, "_lss_memoised", False):
-        return
-    lines = {}
-
-    def getsourcelines(func):
-        key = getattr(func, "__code__", func)
-        found = lines.get(key)
-        if found is None:
-            found = lines[key] = read(func)
-        return found
-
-    getsourcelines._lss_memoised = True
-    getsourcelines.original = read
-    _kernel_impl.getsourcelines = getsourcelines
-    if isinstance(getattr(_kernel_impl, "textwrap", None), types.ModuleType):
-        _kernel_impl.textwrap = _MemoisedTextwrap(_kernel_impl.textwrap)
+def _stderr_line(text):
+    import sys
+    print(text, file=sys.stderr)
 
 
 def init(arch: str | None = None, threads: int | None = None, offline_cache: bool = True,
          debug: bool = False) -> str:
-    """Initialise Taichi once per process and return the arch name in use.
+    """Initialise Taichi once per process and return the backend in use (``"cpu"``,
+    ``"cuda"``, ...).
 
     Parameters
     ----------
     arch : {"cpu", "cuda", "vulkan", "metal", "opengl", "gpu", "auto"} or None
         Backend.  ``None`` keeps the current one if Taichi is initialised, else ``"cpu"``.
+        ``"auto"``: CUDA when a device answers, else the CPU with one line on stderr;
+        ``"gpu"``: the first GPU backend that answers (see :func:`resolve`); both probe in a
+        subprocess, so a machine without a GPU never crashes the caller.
     threads : int or None
         CPU threads for the CPU backend (``None``: Taichi's default, all cores).
     offline_cache : bool
@@ -132,9 +124,10 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
         raise ValueError(f"arch: expected one of {', '.join(ARCHES)}, got {arch!r}")
     if threads is not None and (not isinstance(threads, int) or threads < 1):
         raise ValueError(f"threads: expected a positive integer, got {threads!r}")
+    arch = resolve(arch, log=_stderr_line)
     if _state["arch"] == arch and _state["threads"] == threads:
         return arch
-    kwargs = dict(arch=_resolve(arch), offline_cache=offline_cache, debug=debug,
+    kwargs = dict(arch=getattr(ti, arch), offline_cache=offline_cache, debug=debug,
                   default_fp=ti.f32, log_level=ti.WARN, random_seed=0,
                   unrolling_limit=0)
     if threads is not None:
@@ -144,10 +137,9 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
         # a kernel's body and took ~half the compile time of the median's selection network
         # (4.6 -> 2.3 s), for no speed on the CPU: LLVM's own passes do the same there
         kwargs["cfg_optimization"] = False
-    if arch in ("cuda", "vulkan", "metal", "opengl"):
+    if arch != "cpu":
         kwargs["enable_fallback"] = False
-    _memoise_source_positions()
-    _memoise_source_reading()
+    taichi_patches.install()
     try:
         ti.init(**kwargs)
     except RuntimeError as exc:
