@@ -28,6 +28,7 @@ from .kernels.backend import FieldPool
 from .model.costs import BoundaryCosts
 from .model.hierarchy import PatchHierarchy
 from .model.levelset import LevelSet
+from .model.messages import Messages
 from .model.occlusion import OcclusionGeometry
 from .params import Params, c_max
 from .model.shapes import GlobalShapes
@@ -120,8 +121,8 @@ class Solver:
         self.pool = pool
         self.left = pool.vector(3, ti.f32, (H, W))
         self.right = pool.vector(3, ti.f32, (H, W))
-        self.hierarchy = PatchHierarchy(pool, H, W, C, self.params.patch_sizes,
-                                        self.params.subpixel_messages)
+        self.hierarchy = PatchHierarchy(pool, H, W, C, self.params.patch_sizes)
+        self.messages = Messages(self.hierarchy, self.params.subpixel_messages)
         self.costs = BoundaryCosts(pool, H, W, C)
         self.shapes = GlobalShapes(pool, H, W)
         self.occ = OcclusionGeometry(pool, H, W, C)
@@ -161,7 +162,7 @@ class Solver:
 
         t0 = time.perf_counter()
         self.hierarchy.build_costs(self.left, self.right)
-        self.costs.build(self.hierarchy.cost[0], self.left, self.right, self.params)
+        self.costs.build(self.hierarchy.matching_cost, self.left, self.right, self.params)
         ti.sync()
         self.timings = {"setup_costs": time.perf_counter() - t0}
         self.timings.update({s: 0.0 for s in STAGES})
@@ -201,7 +202,7 @@ class Solver:
     def _foreground_shift(self, left_mask):
         """Half the foreground's left-view disparity: the median first consensus mean over
         the initial region (read as if the frames coincided)."""
-        self.hierarchy.messages(0.0, False, False)
+        self.messages.run(0.0, False, False)
         self.hierarchy.downward()
         mean = self.hierarchy.consensus_mean.to_numpy()
         prec = self.hierarchy.precision.to_numpy()
@@ -254,7 +255,7 @@ class Solver:
         if not first:
             hier.upward(ls.D, ls.phi, self.occ.phi_plus)
         t = self._stage("upward", t)
-        hier.messages(p.beta / self.c_max, not first, not first)
+        self.messages.run(p.beta / self.c_max, not first, not first)
         t = self._stage("messages", t)
         hier.downward()
         t = self._stage("downward", t)
@@ -266,7 +267,7 @@ class Solver:
         t = self._stage("boundary", t)
         reinit = self.iteration % p.reinit_every == 0
         # the median's last pass also writes D (Eq. 3) from the new phi
-        ls.evolve(hier.cost[0], self.c_max, self.shapes, self.occ, p, reinit)
+        ls.evolve(hier.matching_cost, self.c_max, self.shapes, self.occ, p, reinit)
         t = self._stage("levelset", t)
         flipped = int(ls.flipped[None])
         area = int(ls.area[None])
@@ -352,16 +353,17 @@ class Solver:
                              f"level={level}, x={x}, y={y}")
         matching = h.patch_cost(level, y, x).astype(np.float64)
         c = np.arange(1, self.c_max + 1, dtype=np.float64)
-        d_sum = h.d_sum[level][y, x // h.lanes][x % h.lanes]
+        lev = h.levels[level]
+        d_sum = lev.d_sum[y, x // h.lanes][x % h.lanes]
         d_mean = d_sum / max(h.in_image_count(level, y, x), 1)
         prior = self.iteration > 1
         beta = self.params.beta / self.c_max if prior else 0.0
         cost = matching + beta * np.abs(c - d_mean)
         # the iteration passes messages on as relays only: the same inputs again give the
         # last iteration's d_p, sigma_p and validity
-        h.messages(beta, prior, prior, keep=True)
-        return dict(d=2 * c, cost=cost, matching_cost=matching, d_p=2.0 * h.d_p[level][y, x],
-                    sigma_p=2.0 * h.sigma_p[level][y, x], valid=bool(h.valid[level][y, x]),
+        self.messages.run(beta, prior, prior, keep=True)
+        return dict(d=2 * c, cost=cost, matching_cost=matching, d_p=2.0 * lev.d_p[y, x],
+                    sigma_p=2.0 * lev.sigma_p[y, x], valid=bool(lev.valid[y, x]),
                     mean_D=2.0 * d_mean)
 
     def result(self):

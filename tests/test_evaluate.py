@@ -216,7 +216,7 @@ def test_cli(dataset, tmp_path, capsys):
 
 
 def test_cli_trace_flag_reaches_run_eval(dataset, tmp_path, monkeypatch):
-    from lss_kernels import evaluate
+    from lss_kernels.apps import evaluate
     seen = {}
 
     def fake_run_eval(dataset_dir, **kwargs):

@@ -5,6 +5,7 @@ import taichi as ti
 
 from lss_kernels.reference import kernels as ref
 from lss_kernels.kernels.backend import FieldPool
+from lss_kernels.model.messages import Messages
 from lss_kernels.params import Params
 
 H, W, C = 22, 34, 7
@@ -39,6 +40,7 @@ def hierarchy(pair):
     lf.from_numpy(pair[0])
     rf.from_numpy(pair[1])
     h.build_costs(lf, rf)
+    h.messages = Messages(h)        # one message pass (one compiled kernel) per hierarchy
     yield h
     pool.destroy()
 
@@ -58,7 +60,7 @@ def test_level_geometry_children_tile_the_parent():
 def test_patch_costs_match_box_means(pair, hierarchy):
     want = ref.patch_costs(pair[0].astype(np.float64), pair[1].astype(np.float64), C, SIZES)
     for level in range(len(SIZES)):
-        got = _inside(hierarchy, hierarchy.cost[level], level)
+        got = _inside(hierarchy, hierarchy.levels[level].cost, level)
         np.testing.assert_allclose(got, want[level], atol=2e-5)
         assert got.min() == pytest.approx(0.0, abs=1e-6)
         assert got.max() == pytest.approx(1.0, abs=1e-6)
@@ -77,11 +79,11 @@ def test_upward_sums_and_extremes_match_brute_force(hierarchy):
     pool, (fD, fphi, fplus) = _field([D, phi, phi_plus])
     hierarchy.upward(fD, fphi, fplus)
     for level, s in enumerate(SIZES):
-        np.testing.assert_allclose(hierarchy.level_image(hierarchy.d_sum, level),
+        np.testing.assert_allclose(hierarchy.levels[level].image(hierarchy.levels[level].d_sum),
                                    ref.box_sum(D, s), rtol=1e-5, atol=1e-3)
-        np.testing.assert_allclose(hierarchy.level_image(hierarchy.phi_max, level),
+        np.testing.assert_allclose(hierarchy.levels[level].image(hierarchy.levels[level].phi_max),
                                    ref.upward_extremes(phi.astype(np.float32), s, np.max))
-        np.testing.assert_allclose(hierarchy.level_image(hierarchy.phi_plus_min, level),
+        np.testing.assert_allclose(hierarchy.levels[level].image(hierarchy.levels[level].phi_plus_min),
                                    ref.upward_extremes(phi_plus.astype(np.float32), s, np.min))
     pool.destroy()
 
@@ -130,15 +132,16 @@ def test_hierarchy_in_one_pixel_blocks_matches_eight(pair, monkeypatch):
             f.from_numpy(a.astype(np.float32))
         h.build_costs(lf, rf)
         out = {}
+        messages = Messages(h)
         for it in range(2):             # the second pass reuses the cached candidates
             h.upward(fD, fphi, fplus)
-            h.messages(0.4 / C, True, True, keep=True)
+            messages.run(0.4 / C, True, True, keep=True)
             h.downward()
         for level in range(len(SIZES)):
             for name in ("d_sum", "phi_max", "phi_plus_min", "relay_a", "relay_b"):
-                out[name, level] = h.level_image(getattr(h, name), level)
+                out[name, level] = h.levels[level].image(getattr(h.levels[level], name))
             for name in ("d_p", "sigma_p", "valid"):
-                out[name, level] = getattr(h, name)[level].to_numpy()
+                out[name, level] = getattr(h.levels[level], name).to_numpy()
         out["precision"] = h.precision.to_numpy()
         out["consensus_mean"] = h.consensus_mean.to_numpy()
         results.append(out)
@@ -163,18 +166,18 @@ def test_messages_validity_and_consensus_match_reference(hierarchy):
     pool, (fD, fphi, fplus) = _field([D, phi, phi_plus])
     hierarchy.upward(fD, fphi, fplus)
     beta = 0.4 / C
-    hierarchy.messages(beta, True, True, keep=True)
+    hierarchy.messages.run(beta, True, True, keep=True)
     d_ps, sig_ps, valids = [], [], []
     for level, s in enumerate(SIZES):
-        cost = _inside(hierarchy, hierarchy.cost[level], level).astype(np.float64)
+        cost = _inside(hierarchy, hierarchy.levels[level].cost, level).astype(np.float64)
         d_mean = ref.box_mean(D.astype(np.float32), s)
         # Eq. 4: valid = (max phi > 0) XOR (min phi(x + delta_theta) < 0)
         valid = (ref.upward_extremes(phi.astype(np.float32), s, np.max) > 0) != \
             (ref.upward_extremes(phi_plus.astype(np.float32), s, np.min) < 0)
-        np.testing.assert_array_equal(hierarchy.valid[level].to_numpy().astype(bool), valid)
+        np.testing.assert_array_equal(hierarchy.levels[level].valid.to_numpy().astype(bool), valid)
         d_p, sigma_p = ref.patch_messages(cost, d_mean, beta, subpixel=True)
-        got_d = hierarchy.d_p[level].to_numpy()
-        got_s = hierarchy.sigma_p[level].to_numpy()
+        got_d = hierarchy.levels[level].d_p.to_numpy()
+        got_s = hierarchy.levels[level].sigma_p.to_numpy()
         assert valid.any() or s == max(SIZES)   # the largest patches may all straddle it
         if valid.any():
             same = valid & np.isclose(got_d, d_p, rtol=0, atol=1e-4)
@@ -204,16 +207,16 @@ def test_candidate_messages_match_scan_at_integer_and_extreme_means(hierarchy, d
     pool, (fD, fphi, fplus) = _field([D, ones, ones])   # fg and occluded everywhere: valid
     hierarchy.upward(fD, fphi, fplus)
     beta = 0.4 * 3 / C    # a strong prior, so that it moves many argmins
-    hierarchy.messages(beta, True, True, keep=True)
+    hierarchy.messages.run(beta, True, True, keep=True)
     for level, s in enumerate(SIZES):
-        assert hierarchy.valid[level].to_numpy().all()
-        cost = _inside(hierarchy, hierarchy.cost[level], level).astype(np.float64)
+        assert hierarchy.levels[level].valid.to_numpy().all()
+        cost = _inside(hierarchy, hierarchy.levels[level].cost, level).astype(np.float64)
         d_p, sigma_p = ref.patch_messages(cost, ref.box_mean(D.astype(np.float32), s), beta,
                                           subpixel=True)
-        got_d = hierarchy.d_p[level].to_numpy()
+        got_d = hierarchy.levels[level].d_p.to_numpy()
         same = np.isclose(got_d, d_p, rtol=0, atol=1e-4)
         assert same.mean() > 0.99
-        np.testing.assert_allclose(hierarchy.sigma_p[level].to_numpy()[same], sigma_p[same],
+        np.testing.assert_allclose(hierarchy.levels[level].sigma_p.to_numpy()[same], sigma_p[same],
                                    rtol=1e-4)
     pool.destroy()
 
@@ -232,15 +235,15 @@ def test_cached_candidates_follow_a_moving_prior_mean(hierarchy):
         for D in (D0, D1):
             pool, (fD, fphi, fplus) = _field([D, ones, ones])
             hierarchy.upward(fD, fphi, fplus)
-            hierarchy.messages(beta, True, True, keep=True)
+            hierarchy.messages.run(beta, True, True, keep=True)
             for level, s in enumerate(SIZES):
-                cost = _inside(hierarchy, hierarchy.cost[level], level).astype(np.float64)
+                cost = _inside(hierarchy, hierarchy.levels[level].cost, level).astype(np.float64)
                 want, sigma = ref.patch_messages(cost, ref.box_mean(D.astype(np.float32), s),
                                                  beta, subpixel=True)
-                got = hierarchy.d_p[level].to_numpy()
+                got = hierarchy.levels[level].d_p.to_numpy()
                 same = np.isclose(got, want, rtol=0, atol=1e-4)
                 assert same.mean() > 0.99, (beta, level, same.mean())
-                np.testing.assert_allclose(hierarchy.sigma_p[level].to_numpy()[same],
+                np.testing.assert_allclose(hierarchy.levels[level].sigma_p.to_numpy()[same],
                                            sigma[same], rtol=1e-4)
             pool.destroy()
 
@@ -250,14 +253,14 @@ def test_first_iteration_messages_ignore_prior_and_validity(hierarchy):
     pool, (fD, fphi, fplus) = _field([rng.random((H, W)) * C, -np.ones((H, W)),
                                       np.ones((H, W))])
     hierarchy.upward(fD, fphi, fplus)   # every patch would be invalid under Eq. 4
-    hierarchy.messages(10.0, False, False, keep=True)
+    hierarchy.messages.run(10.0, False, False, keep=True)
     with pytest.raises(ValueError, match="validity needs the prior"):
-        hierarchy.messages(10.0, False, True, keep=True)
+        hierarchy.messages.run(10.0, False, True, keep=True)
     for level in range(len(SIZES)):
-        assert hierarchy.valid[level].to_numpy().all()
-        cost = _inside(hierarchy, hierarchy.cost[level], level).astype(np.float64)
+        assert hierarchy.levels[level].valid.to_numpy().all()
+        cost = _inside(hierarchy, hierarchy.levels[level].cost, level).astype(np.float64)
         want, _ = ref.patch_messages(cost, np.zeros((H, W)), 0.0, subpixel=True)
-        np.testing.assert_allclose(hierarchy.d_p[level].to_numpy(), want, atol=1e-4)
+        np.testing.assert_allclose(hierarchy.levels[level].d_p.to_numpy(), want, atol=1e-4)
         assert np.abs(want - (cost.argmin(2) + 1)).max() <= 0.5
         assert (want != np.round(want)).mean() > 0.5     # refined below the integer grid
     pool.destroy()
@@ -275,18 +278,19 @@ def test_cached_candidates_are_dropped_when_the_costs_change(pair):
     aux, (fD, fphi, fplus) = _field([D, ones, ones])
     beta = 0.4 / C
     rng = np.random.default_rng(14)
+    messages = Messages(h)
     for trial in range(2):
         left = pair[0] if trial == 0 else rng.random((H, W, 3)).astype(np.float32)
         lf.from_numpy(left)
         rf.from_numpy(pair[1])
         h.build_costs(lf, rf)
         h.upward(fD, fphi, fplus)
-        h.messages(beta, True, True, keep=True)
+        messages.run(beta, True, True, keep=True)
         for level, s in enumerate(SIZES):
-            cost = _inside(h, h.cost[level], level).astype(np.float64)
+            cost = _inside(h, h.levels[level].cost, level).astype(np.float64)
             want, _ = ref.patch_messages(cost, ref.box_mean(D.astype(np.float32), s), beta,
                                          subpixel=True)
-            same = np.isclose(h.d_p[level].to_numpy(), want, rtol=0, atol=1e-4)
+            same = np.isclose(h.levels[level].d_p.to_numpy(), want, rtol=0, atol=1e-4)
             assert same.mean() > 0.99
     aux.destroy()
     pool.destroy()
@@ -296,16 +300,16 @@ def test_integer_messages_without_subpixel_refinement(pair):
     """``subpixel=False`` is the release's integer argmin (Eq. 5 over c = 1 .. c_max)."""
     from lss_kernels.model.hierarchy import PatchHierarchy
     pool = FieldPool()
-    h = PatchHierarchy(pool, H, W, C, SIZES, subpixel=False)
+    h = PatchHierarchy(pool, H, W, C, SIZES)
     lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
     pool.finalize()
     lf.from_numpy(pair[0])
     rf.from_numpy(pair[1])
     h.build_costs(lf, rf)
-    h.messages(0.0, False, False, keep=True)
+    Messages(h, subpixel=False).run(0.0, False, False, keep=True)
     for level in range(len(SIZES)):
-        cost = _inside(h, h.cost[level], level)
-        np.testing.assert_array_equal(h.d_p[level].to_numpy(), cost.argmin(2) + 1)
+        cost = _inside(h, h.levels[level].cost, level)
+        np.testing.assert_array_equal(h.levels[level].d_p.to_numpy(), cost.argmin(2) + 1)
     pool.destroy()
 
 

@@ -210,7 +210,7 @@ def test_boundary_costs_match_a_numpy_reference(ti_arch):
     solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=params)
     H, W = solver.H, solver.W
     m = solver.hierarchy.levels[0].margin
-    cost = solver.hierarchy.cost[0].to_numpy()[m:m + H, m:m + W].astype(np.float64)
+    cost = solver.hierarchy.matching_cost.to_numpy()[m:m + H, m:m + W].astype(np.float64)
 
     g, _, _ = gaussian_taps(params.occ_sigma, int(math.ceil(4 * params.occ_sigma)))
     dg = np.zeros_like(g)

@@ -106,9 +106,9 @@ def state_from_solver(solver) -> IterationState:
     H, W = solver.H, solver.W
     h = solver.hierarchy
     costs = []
-    for lev, vol in zip(h.levels, h.cost):
+    for lev in h.levels:
         m = lev.margin
-        costs.append(vol.to_numpy()[m:m + H, m:m + W].astype(np.float64))
+        costs.append(lev.cost.to_numpy()[m:m + H, m:m + W].astype(np.float64))
     f64 = lambda f: f.to_numpy().astype(np.float64)
     prec = f64(h.precision)
     return IterationState(
