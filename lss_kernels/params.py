@@ -74,7 +74,7 @@ class Params:
         every scene).
     shape_weight_power : int
         Rows of the least-squares fit of Theta are weighted by (1 / sigma^2) ** power:
-        1 is Eq. 9 of the paper, 2 is what the release does.
+        1 is Eq. 8 of the paper, 2 is what the release does.
     subpixel_messages : bool
         Eq. 5 takes d_p as an argmin over a continuous d: True refines the integer argmin to
         the vertex of the parabola through the patch cost at it and its two neighbours

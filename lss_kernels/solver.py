@@ -25,6 +25,7 @@ import taichi as ti
 
 from .kernels import backend
 from .kernels.backend import FieldPool
+from .model import STAGES
 from .model.costs import BoundaryCosts
 from .model.hierarchy import PatchHierarchy
 from .model.levelset import LevelSet
@@ -67,7 +68,6 @@ class Result:
     history: list = field(default_factory=list)
 
 
-STAGES = ("upward", "messages", "downward", "shapes", "occlusion", "boundary", "levelset")
 
 
 @ti.data_oriented

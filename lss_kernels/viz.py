@@ -381,7 +381,7 @@ def evolution_frame(left, snapshot, d_max, iteration, true_disparity=None, score
 
     Panels, left to right: the left image with the current (red) and initial (yellow)
     boundary; the consensus mean d-bar (Eq. 7; cyclopean frame, left-view disparity units);
-    its confidence 1/sigma (cyclopean frame); the current two-surface disparity D (Eq. 4,
+    its confidence 1/sigma (cyclopean frame); the current two-surface disparity D (Eq. 3,
     left view) with occlusions in dark blue; and, when ground truth is given, the true
     disparity with the current and initial boundaries.
 

@@ -33,11 +33,11 @@ import time
 import numpy as np
 
 from ..kernels.backend import ARCHES, DEFAULT_ARCH
+from ..model import STAGES
 
 __all__ = ["add_cli", "bandwidth", "fit_exponent", "main", "main_bench", "run_benchmark",
            "synthetic_pair"]
 
-STAGES = ("upward", "messages", "downward", "shapes", "occlusion", "boundary", "levelset")
 
 #: Sweeps: ``sizes`` (W, H) at ``size_d`` disparities, ``disparities`` at ``disp_size``, and the
 #: Taichi-vs-numpy configuration ``compare`` (W, H, d_max), which also joins the thread sweep.
@@ -195,7 +195,6 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
     """
     import taichi as ti
     from ..reference import iteration as npi
-    from ..kernels.filters import gaussian_taps
     from ..params import Params
     from ..solver import Solver
     params = params if params is not None else Params(max_iterations=10 ** 6, stop_fraction=0.0)
@@ -203,7 +202,6 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
     t = time.perf_counter()
     solver = Solver(left, right, d_max, init, params=params, profile=True)
     setup = time.perf_counter() - t
-    taps = gaussian_taps(params.curvature_sigma)
     n, m = max(1, int(iterations)), int(numpy_iterations)
     blocks, numpy_blocks = [], []
     try:
@@ -224,7 +222,7 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
             if state is not None:
                 tot = {k: 0.0 for k in STAGES}
                 for _ in range(m):
-                    state, sec = npi.iteration(state, params, taps)
+                    state, sec = npi.iteration(state, params)
                     for k in STAGES:
                         tot[k] += sec[k]
                 numpy_blocks.append({k: v / m for k, v in tot.items()})

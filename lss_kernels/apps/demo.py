@@ -4,7 +4,7 @@ The demo steps a :class:`~lss_kernels.Solver` and every ``every`` iterations rec
 
 * a frame laid out like Fig. 1(b): the left image with the current (red) and initial (yellow)
   boundary, the consensus mean d-bar and its confidence 1/sigma (Eq. 7, cyclopean frame), the
-  two-surface disparity D (Eq. 4) with occlusions in dark blue, and, when ground truth exists,
+  two-surface disparity D (Eq. 3) with occlusions in dark blue, and, when ground truth exists,
   the true disparity with the current boundary; the caption gives the iteration and, with
   ground truth, the running occlusion F1 and bad-4.0;
 * the disparity message of one patch, drawn as in Fig. 1(a) (Eq. 6).

@@ -25,10 +25,10 @@ with two layers: the foreground is always in front).
 import taichi as ti
 
 from ..kernels import lanes
+from . import FIXED_POINT_STEPS
 
 __all__ = ["OcclusionGeometry"]
 
-FIXED_POINT_STEPS = 6
 
 
 @ti.data_oriented

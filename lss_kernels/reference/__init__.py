@@ -1,1 +1,3 @@
-"""reference"""
+"""The numpy specifications the tests hold the kernels to: :mod:`.kernels` (one function per
+kernel) and :mod:`.iteration` (one whole iteration of the solver, composed of them).  Slow,
+plain, float64; the solver never calls them."""

@@ -1,18 +1,30 @@
-"""Readable numpy references of the kernels: the specification the tests and the benchmark
-compare the Taichi kernels against.  Slow, simple, one function per kernel.
+"""Readable numpy specifications of the kernels, one function per kernel: what the tests hold
+the Taichi kernels to and what :mod:`lss_kernels.reference.iteration` composes into one whole
+iteration.  Plain, vectorised, float64.
 
 Frames and units are those of the kernels: cyclopean ``(H, W)`` arrays indexed ``[y, x]``,
-cyclopean disparities ``c = 1 .. c_max`` (volume index ``k = c - 1``).
+cyclopean disparities ``c = 1 .. c_max`` (volume index ``k = c - 1``); Theta over the
+normalised basis (``x_n = (x - (W - 1) / 2) / s``, ``y_n = (y - (H - 1) / 2) / s``,
+``s = max(H, W) / 2``).
 """
+import math
+
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from ..kernels.filters import gaussian_taps
+from ..model import FIXED_POINT_STEPS
 
 __all__ = [
-    "matching_cost", "box_mean", "box_sum", "patch_costs", "patch_messages", "consensus",
-    "upward_extremes", "median_filter", "gaussian_derivatives", "curvature", "delta_theta",
-    "interp_row", "interp_volume", "levelset_step",
+    "matching_cost", "box_sum", "box_mean", "box_extreme", "patches_containing", "patch_costs",
+    "patch_messages", "consensus", "median_filter", "convolve", "gaussian_derivatives",
+    "curvature", "interp_row", "interp_volume", "shape_value", "basis", "fit_shape",
+    "delta_theta", "boundary_weight", "levelset_step", "squared_distance", "reinitialise",
+    "disparity",
 ]
 
 
+# ---------------------------------------------------------------------------- costs (Sec. 4)
 def matching_cost(left, right, c_max):
     """M[y, x, k] = mean over RGB of |L(y, x + c) - R(y, x - c)|, ``c = k + 1``, with image
     coordinates clamped to the border.  ``left``, ``right``: ``(H, W, 3)`` in [0, 1]."""
@@ -21,29 +33,46 @@ def matching_cost(left, right, c_max):
     M = np.empty((H, W, c_max), np.float64)
     for k in range(c_max):
         c = k + 1
-        xl = np.minimum(x + c, W - 1)
-        xr = np.maximum(x - c, 0)
-        M[:, :, k] = np.abs(left[:, xl] - right[:, xr]).mean(axis=2)
+        M[:, :, k] = np.abs(left[:, np.minimum(x + c, W - 1)]
+                            - right[:, np.maximum(x - c, 0)]).mean(axis=2)
     return M
 
 
-def box_sum(a, size):
-    """Sum of ``a`` (``(H, W)`` or ``(H, W, K)``) over the ``size x size`` box centred on each
-    pixel (covering ``[x - size // 2, x - size // 2 + size - 1]``), zero outside the image."""
+def _box(a, size, reduce, fill):
+    """``reduce`` of ``a`` (``(H, W)`` or ``(H, W, K)``) over the ``size x size`` patch
+    ``[x - size // 2, x - size // 2 + size - 1]`` (both axes) of every pixel, ``fill``
+    outside the image (separable)."""
     h = size // 2
-    pad = [(h, size - 1 - h), (h, size - 1 - h)] + [(0, 0)] * (a.ndim - 2)
-    p = np.pad(np.asarray(a, np.float64), pad)
-    c = np.cumsum(np.cumsum(p, axis=0), axis=1)
-    c = np.pad(c, [(1, 0), (1, 0)] + [(0, 0)] * (a.ndim - 2))
-    H, W = a.shape[:2]
-    return (c[size:size + H, size:size + W] - c[:H, size:size + W]
-            - c[size:size + H, :W] + c[:H, :W])
+    pad = [(h, size - 1 - h)] * 2 + [(0, 0)] * (a.ndim - 2)
+    p = np.pad(np.asarray(a, np.float64), pad, constant_values=fill)
+    p = reduce(sliding_window_view(p, size, axis=1), axis=-1)
+    return reduce(sliding_window_view(p, size, axis=0), axis=-1)
+
+
+def box_sum(a, size):
+    """Sum over each pixel's patch of side ``size``, in-image pixels only (exact zeros where
+    the patch holds only zeros)."""
+    return _box(a, size, np.sum, 0.0)
 
 
 def box_mean(a, size):
-    """Mean over the in-image pixels of the centred ``size x size`` box."""
+    """Mean over the in-image pixels of each pixel's patch of side ``size``."""
     n = box_sum(np.ones(a.shape[:2]), size)
     return box_sum(a, size) / (n if a.ndim == 2 else n[..., None])
+
+
+def box_extreme(a, size, reduce):
+    """``np.max`` or ``np.min`` (``reduce``) of ``a`` over each pixel's patch, in-image pixels
+    only."""
+    return _box(a, size, reduce, -np.inf if reduce is np.max else np.inf)
+
+
+def patches_containing(a, size):
+    """Sum of per-patch values ``a`` over the patches of side ``size`` that contain each pixel:
+    a patch centred on ``x`` covers ``[x - size // 2, x - size // 2 + size - 1]``, so pixel
+    ``x`` lies in the patches centred on ``[x - (size - 1 - size // 2), x + size // 2]`` (the
+    transpose of :func:`box_sum`; the same box only for odd sizes)."""
+    return box_sum(a[::-1, ::-1], size)[::-1, ::-1]
 
 
 def patch_costs(left, right, c_max, sizes):
@@ -56,6 +85,7 @@ def patch_costs(left, right, c_max, sizes):
     return out
 
 
+# ---------------------------------------------------------------------------- hierarchy
 def patch_messages(cost, d_mean, beta, subpixel=True):
     """Eq. 5: d_p = argmin_c C_p(c) + beta |c - <D>_p| and sigma_p = c_max / (mean - min).
 
@@ -83,73 +113,130 @@ def patch_messages(cost, d_mean, beta, subpixel=True):
 def consensus(d_p, sigma_p, valid, sizes):
     """Eq. 7: per pixel, 1/sigma^2 and d-bar from all valid patches (of every level) that
     contain it.  Lists per level of ``(H, W)`` arrays; returns ``(precision, mean)``."""
-    # the patches containing a pixel are centred on the mirrored box (it matters for even
-    # sizes): flip, box-sum, flip back
-    gather = lambda a, size: box_sum(a[::-1, ::-1], size)[::-1, ::-1]
-    a = sum(gather(np.where(v, 1.0 / s ** 2, 0.0), size)
+    a = sum(patches_containing(np.where(v, 1.0 / s ** 2, 0.0), size)
             for s, v, size in zip(sigma_p, valid, sizes))
-    b = sum(gather(np.where(v, d / s ** 2, 0.0), size)
+    b = sum(patches_containing(np.where(v, d / s ** 2, 0.0), size)
             for d, s, v, size in zip(d_p, sigma_p, valid, sizes))
     with np.errstate(invalid="ignore", divide="ignore"):
-        a = np.where(a > 1e-12 * max(a.max(), 1e-300), a, 0.0)  # summed-area round-off
         mean = np.where(a > 0, b / a, 0.0)
     return a, mean
 
 
-def upward_extremes(a, size, reduce):
-    """Max (``reduce=np.max``) or min of ``a`` over each centred patch (in-image pixels)."""
-    H, W = a.shape
+# ---------------------------------------------------------------------------- filters
+def median_filter(a, size):
+    """Median over ``size x size`` windows with symmetric (mirror, edge repeated) borders."""
+    if size == 1:
+        return np.array(a, copy=True)
     h = size // 2
-    out = np.empty((H, W), np.float64)
-    for y in range(H):
-        for x in range(W):
-            out[y, x] = reduce(a[max(0, y - h):max(0, y - h + size),
-                                 max(0, x - h):max(0, x - h + size)])
+    win = sliding_window_view(np.pad(a, h, mode="symmetric"), (size, size))
+    return np.median(win.reshape(np.shape(a) + (size * size,)), axis=-1)
+
+
+def convolve(a, taps, axis):
+    """``out[x] = sum_i taps[i + h] a[reflect(x - i)]`` along ``axis`` (a convolution with
+    symmetric borders: -1 -> 0, n -> n - 1)."""
+    h = (len(taps) - 1) // 2
+    pad = [(0, 0)] * a.ndim
+    pad[axis] = (h, h)
+    p = np.pad(a, pad, mode="symmetric")
+    n = a.shape[axis]
+    out = np.zeros_like(a, dtype=np.float64)
+    for i in range(-h, h + 1):
+        out += taps[i + h] * np.take(p, np.arange(h - i, h - i + n), axis=axis)
     return out
 
 
-def median_filter(a, size):
-    """Median over ``size x size`` windows with symmetric (mirror, edge repeated) borders."""
-    h = size // 2
-    p = np.pad(a, h, mode="symmetric")
-    win = np.lib.stride_tricks.sliding_window_view(p, (size, size))
-    return np.median(win, axis=(2, 3))
-
-
-def gaussian_derivatives(phi, sigma):
-    """phi_x, phi_y, phi_xx, phi_yy, phi_xy by separable Gaussian-derivative convolution
+def gaussian_derivatives(a, sigma):
+    """``(a_x, a_y, a_xx, a_yy, a_xy)`` by separable Gaussian-derivative convolution
     (half-width ceil(3.5 sigma), symmetric borders)."""
-    from ..kernels.filters import gaussian_taps
-    g = gaussian_taps(sigma)
-    h = (len(g[0]) - 1) // 2
-
-    def conv(a, taps, axis):
-        p = np.pad(a, [(h, h) if ax == axis else (0, 0) for ax in range(2)], mode="symmetric")
-        out = np.zeros_like(a, dtype=np.float64)
-        n = a.shape[axis]
-        for i in range(-h, h + 1):
-            sl = [slice(None)] * 2
-            sl[axis] = slice(h - i, h - i + n)
-            out += taps[i + h] * p[tuple(sl)]
-        return out
-
-    cx = [conv(phi, t, 1) for t in g]
-    return (conv(cx[1], g[0], 0), conv(cx[0], g[1], 0), conv(cx[2], g[0], 0),
-            conv(cx[0], g[2], 0), conv(cx[1], g[1], 0))
+    g, g1, g2 = gaussian_taps(sigma)
+    t0, t1, t2 = (convolve(a, t, 1) for t in (g, g1, g2))
+    return (convolve(t1, g, 0), convolve(t0, g1, 0), convolve(t2, g, 0), convolve(t0, g2, 0),
+            convolve(t1, g1, 0))
 
 
-def curvature(phi, sigma, clip):
-    """kappa = div(grad phi / |grad phi|) (clipped) and the unit normal (N_x, N_y)."""
-    px, py, pxx, pyy, pxy = gaussian_derivatives(phi, sigma)
-    norm = np.sqrt(px ** 2 + py ** 2) + 1e-10
-    k = (pxx * py ** 2 - 2 * px * py * pxy + pyy * px ** 2) / norm ** 3
+def curvature(derivatives, clip):
+    """kappa = div(grad phi / |grad phi|) (clipped to +-``clip``) and the unit normal
+    ``(N_x, N_y)``, from :func:`gaussian_derivatives` of phi."""
+    px, py, pxx, pyy, pxy = derivatives
+    norm = np.sqrt(px * px + py * py) + 1e-10
+    k = (pxx * py * py - 2.0 * px * py * pxy + pyy * px * px) / norm ** 3
     return np.clip(k, -clip, clip), px / norm, py / norm
 
 
-def delta_theta(theta1, theta2, phi_x, steps=6, c_cap=None):
-    """The ray cast of Sec. 2 for callables ``theta1(x, y)``, ``theta2(x, y)`` (vectorised over
-    arrays) on the grid of ``phi_x``: solves t = Theta_1(x) - Theta_2(x - s t) by fixed-point
-    iteration; returns s t (0 where Theta_1 <= Theta_2 or phi_x = 0)."""
+# ---------------------------------------------------------------------------- sampling
+def interp_row(a, x):
+    """Linear interpolation of each row of ``a`` at real positions ``x`` (same shape),
+    clamped to the image."""
+    H, W = a.shape
+    if W == 1:
+        return np.array(a, dtype=np.float64, copy=True)
+    xf = np.clip(x, 0.0, W - 1.0)
+    x0 = np.minimum(np.floor(xf).astype(np.int64), W - 2)
+    t = xf - x0
+    rows = np.arange(H)[:, None]
+    return (1.0 - t) * a[rows, x0] + t * a[rows, x0 + 1]
+
+
+def interp_volume(vol, x, c):
+    """``vol[y, x, c - 1]`` at real x and c per pixel (bilinear, clamped to the volume),
+    ``x`` and ``c`` of shape ``(H, W)``."""
+    H, W, C = vol.shape
+    xf = np.clip(x, 0.0, W - 1.0)
+    x0 = np.minimum(np.floor(xf).astype(np.int64), max(W - 2, 0))
+    x1 = np.minimum(x0 + 1, W - 1)
+    tx = xf - x0
+    kf = np.clip(c - 1.0, 0.0, C - 1.0)
+    k0 = np.minimum(np.floor(kf).astype(np.int64), max(C - 2, 0))
+    k1 = np.minimum(k0 + 1, C - 1)
+    tk = kf - k0
+    rows = np.arange(H)[:, None]
+    a = (1.0 - tk) * vol[rows, x0, k0] + tk * vol[rows, x0, k1]
+    b = (1.0 - tk) * vol[rows, x1, k0] + tk * vol[rows, x1, k1]
+    return (1.0 - tx) * a + tx * b
+
+
+# ---------------------------------------------------------------------------- shapes (Eq. 8)
+def _normalised(x, y, H, W):
+    inv_s = 1.0 / (max(H, W) / 2.0)
+    return (x - (W - 1) / 2.0) * inv_s, (y - (H - 1) / 2.0) * inv_s
+
+
+def basis(xn, yn):
+    """The paper's basis {x^2, xy, y^2, x, y, 1} at (normalised) coordinates, last axis."""
+    return np.stack([xn * xn, xn * yn, yn * yn, xn, yn, np.ones_like(xn)], axis=-1)
+
+
+def shape_value(theta_j, x, y, shape):
+    """Theta_j at real cyclopean pixel coordinates of an image of ``shape = (H, W)``."""
+    xn, yn = _normalised(x, y, *shape)
+    t = theta_j
+    return t[0] * xn * xn + t[1] * xn * yn + t[2] * yn * yn + t[3] * xn + t[4] * yn + t[5]
+
+
+def fit_shape(weight, target, previous):
+    """Eq. 8: weighted least squares of ``target`` (``(H, W)``) on the basis over the pixels
+    with ``weight > 0``.  Returns ``(theta, updated)``: ``previous`` and False with fewer
+    than 6 rows or a rank-deficient system."""
+    sel = weight > 0
+    if sel.sum() < 6:
+        return previous, False
+    y, x = np.nonzero(sel)
+    xn, yn = _normalised(x.astype(np.float64), y.astype(np.float64), *weight.shape)
+    sw = np.sqrt(weight[sel])
+    sol, _, rank, _ = np.linalg.lstsq(basis(xn, yn) * sw[:, None], target[sel] * sw,
+                                      rcond=None)
+    if rank < 6 or not np.all(np.isfinite(sol)):
+        return previous, False
+    return sol, True
+
+
+# ---------------------------------------------------------------------------- occlusion
+def delta_theta(theta1, theta2, phi_x, steps=FIXED_POINT_STEPS, c_cap=None):
+    """The ray cast of Sec. 2 for callables ``theta1(x, y)``, ``theta2(x, y)`` (vectorised)
+    on the grid of ``phi_x``: ``t = Theta_1(x) - Theta_2(x - s t)`` by ``steps`` fixed-point
+    steps from the jump at x, ``s = sign(phi_x)``, each clipped to ``[0, c_cap]``; returns
+    ``s t`` (0 where Theta_1 <= Theta_2 or phi_x = 0)."""
     H, W = phi_x.shape
     y, x = np.mgrid[0:H, 0:W].astype(np.float64)
     s = np.sign(phi_x)
@@ -161,30 +248,28 @@ def delta_theta(theta1, theta2, phi_x, steps=6, c_cap=None):
     return np.where((jump > 0) & (s != 0), s * t, 0.0)
 
 
-def interp_row(a, x):
-    """Linear interpolation of each row of ``a`` at real positions ``x`` (same shape), clamped."""
-    H, W = a.shape
-    xf = np.clip(x, 0, W - 1)
-    x0 = np.minimum(np.floor(xf).astype(int), W - 2)
-    t = xf - x0
+# ---------------------------------------------------------------------------- level set
+def boundary_weight(b_occ, edge_left, edge_right, c, alpha):
+    """B(x, y, c) = a_occ B_occ + a_mono B_mono + a_const at a real c per pixel (linear between
+    integer disparities), B_mono(c) = 1 - e_L(x + c) - e_R(x - c) with zero edge score off the
+    image (Eq. 1's B)."""
+    H, W, C = b_occ.shape
+    x = np.arange(W)[None, :]
     rows = np.arange(H)[:, None]
-    return (1 - t) * a[rows, x0] + t * a[rows, x0 + 1]
+    kf = np.clip(c - 1.0, 0.0, C - 1.0)
+    k0 = (np.minimum(np.floor(kf).astype(np.int64), C - 2) if C > 1
+          else np.zeros_like(kf, dtype=np.int64))
+    t = kf - k0
 
+    def at(k):
+        xl, xr = x + k + 1, x - k - 1
+        e = np.where(xl < W, edge_left[rows, np.minimum(xl, W - 1)], 0.0)
+        e = e + np.where(xr >= 0, edge_right[rows, np.maximum(xr, 0)], 0.0)
+        return alpha[0] * b_occ[rows, x, k] + alpha[1] * (1.0 - e)
 
-def interp_volume(vol, x, c):
-    """vol[y, x, c - 1] at real x and c (bilinear, clamped), ``x`` and ``c`` of shape (H, W)."""
-    H, W, C = vol.shape
-    xf = np.clip(x, 0, W - 1)
-    x0 = np.minimum(np.floor(xf).astype(int), W - 2)
-    tx = xf - x0
-    kf = np.clip(c - 1.0, 0, C - 1)
-    k0 = np.minimum(np.floor(kf).astype(int), C - 2)
-    tk = kf - k0
-    y = np.arange(H)[:, None]
-    at = lambda xx, kk: vol[y, xx, kk]
-    a = (1 - tk) * at(x0, k0) + tk * at(x0, k0 + 1)
-    b = (1 - tk) * at(x0 + 1, k0) + tk * at(x0 + 1, k0 + 1)
-    return (1 - tx) * a + tx * b
+    v0 = at(k0)
+    v1 = at(k0 + 1) if C > 1 else v0
+    return (1.0 - t) * v0 + t * v1 + alpha[2]
 
 
 def levelset_step(phi, cost1, theta1_map, theta2_map, dtheta, b_map, b_x, b_y, kappa, n_x,
@@ -197,3 +282,45 @@ def levelset_step(phi, cost1, theta1_map, theta2_map, dtheta, b_map, b_x, b_y, k
     m2 = interp_volume(cost1, x - dtheta, theta2_map)
     bt = np.clip(b_map * kappa + n_x * b_x + n_y * b_y, -clip, clip)
     return phi + dt * (1 / np.pi) / (1 + phi ** 2) * (-m1 + m2 + mu * bt)
+
+
+def squared_distance(features):
+    """Squared Euclidean distance of every pixel to the nearest ``True`` of ``features``
+    (``inf`` where there is none).  scipy's exact EDT when it is installed (the tests'
+    extra), else a separable numpy one (``lss bench`` runs without scipy)."""
+    if not features.any():
+        return np.full(features.shape, np.inf)
+    try:
+        from scipy.ndimage import distance_transform_edt
+        return distance_transform_edt(~features) ** 2
+    except ImportError:
+        pass
+    H, W = features.shape
+    idx = np.arange(H)[:, None] * np.ones((1, W))
+    above = np.maximum.accumulate(np.where(features, idx, -np.inf), axis=0)
+    below = np.minimum.accumulate(np.where(features, idx, np.inf)[::-1], axis=0)[::-1]
+    g = np.minimum(idx - above, below - idx) ** 2            # column distances, inf: none
+    xs = np.arange(W, dtype=np.float64)
+    d2 = (xs[:, None] - xs[None, :]) ** 2
+    out = np.empty((H, W))
+    step = max(1, (1 << 22) // (W * W))
+    for y0 in range(0, H, step):
+        out[y0:y0 + step] = (g[y0:y0 + step, None, :] + d2[None]).min(axis=2)
+    return out
+
+
+def reinitialise(phi, scale):
+    """phi <- scale x (distance to the other region - 1/2), signs kept; the distance is capped
+    at the image diagonal."""
+    H, W = phi.shape
+    inside = phi > 0
+    cap = math.sqrt(H * H + W * W)
+    d_in = np.minimum(np.sqrt(squared_distance(~inside)), cap)   # to the nearest background
+    d_out = np.minimum(np.sqrt(squared_distance(inside)), cap)   # to the nearest foreground
+    return np.where(inside, scale * (d_in - 0.5), -scale * (d_out - 0.5))
+
+
+def disparity(phi, theta1_map, theta2_map, c_max):
+    """Eq. 3 with the sharp Heaviside: Theta_1 where phi > 0, else Theta_2, clamped to
+    [0, c_max]."""
+    return np.clip(np.where(phi > 0, theta1_map, theta2_map), 0.0, c_max)
