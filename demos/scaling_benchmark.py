@@ -1,7 +1,7 @@
 """Scaling benchmark of the solver stages (a thin wrapper of ``lss bench``).
 
     python demos/scaling_benchmark.py --quick --json
-    python demos/scaling_benchmark.py --out docs/bench --threads 2 1
+    python demos/scaling_benchmark.py --out bench_out --threads 2 1
 """
 import os
 import sys

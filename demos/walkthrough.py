@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    python demos/walkthrough.py [--preset easy] [--out docs/walkthrough] [--steps 40]
+    python demos/walkthrough.py [--preset easy] [--out walkthrough] [--steps 40]
                                 [--iterations 400] [--arch cpu]
 
 It takes one built-in scene and saves one small PNG per stage into ``--out``, printing what
@@ -114,7 +114,7 @@ def _caption(fig, text, height_px):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--preset", default="easy", help="built-in scene (lss_kernels.scenes)")
-    ap.add_argument("--out", default=os.path.join("docs", "walkthrough"))
+    ap.add_argument("--out", default="walkthrough", help="folder for the figures")
     ap.add_argument("--steps", type=int, default=40, help="phi steps shown in stage 6")
     ap.add_argument("--iterations", type=int, default=400, help="cap for the final stage")
     ap.add_argument("--arch", default=backend.DEFAULT_ARCH, choices=backend.ARCHES)

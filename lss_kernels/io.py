@@ -1,6 +1,6 @@
 """Images, PFM disparities, masks and scene folders.
 
-Conventions (``data/README.md``): the left image is the reference, ``x_right = x_left - d`` with
+Conventions (``docs/scene-format.md``): the left image is the reference, ``x_right = x_left - d`` with
 ``d >= 0``.  Images are float32 ``(H, W, 3)`` arrays in ``[0, 1]``; masks are bool ``(H, W)``;
 disparities are float32 ``(H, W)`` in left-view pixels with ``inf`` = unknown, stored as PFM in
 the Middlebury layout (``Pf`` grayscale header, scale ``-1.0`` = little-endian, rows bottom-up).
@@ -220,7 +220,7 @@ def write_pfm(path, array) -> Path:
 
 @dataclass
 class Scene:
-    """A rectified stereo pair with its ground truth (``data/README.md``).
+    """A rectified stereo pair with its ground truth (``docs/scene-format.md``).
 
     Attributes
     ----------
@@ -290,7 +290,7 @@ def _read_meta(folder: Path) -> dict:
 
 
 def load_scene(folder) -> Scene:
-    """Read a scene folder (``data/README.md``).
+    """Read a scene folder (``docs/scene-format.md``).
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """Occlusion F1 and bad-4.0 near the true boundary: the paper's protocol (Sec. 6).
 
-Following ``data/README.md`` (the authors' release), with all arrays ``(H, W)`` in the left view:
+Following ``docs/scene-format.md`` (the authors' release), with all arrays ``(H, W)`` in the left view:
 
 - ``keep`` = finite ground-truth disparity, minus the true boundary pixels and their left and
   right neighbours;

@@ -1,11 +1,17 @@
 """Shared fixtures: every test that needs Taichi runs on the arch given by --arch (cpu by
 default), initialised once per session through lss_kernels.kernels.backend."""
+import os
+from pathlib import Path
+
 import pytest
 
 
 def pytest_addoption(parser):
     parser.addoption("--arch", default="cpu", help="Taichi arch for kernel tests")
     parser.addoption("--runslow", action="store_true", help="run tests marked slow")
+    parser.addoption("--paper15", default=os.environ.get("LSS_PAPER15"), metavar="DIR",
+                     help="folder of the paper's 15 scenes (default: $LSS_PAPER15); the tests "
+                          "that read them skip without it")
 
 
 def pytest_collection_modifyitems(config, items):
@@ -21,3 +27,12 @@ def pytest_collection_modifyitems(config, items):
 def ti_arch(request):
     from lss_kernels.kernels import backend
     return backend.init(arch=request.config.getoption("--arch"))
+
+
+@pytest.fixture(scope="session")
+def paper15(request):
+    """The folder of the paper's 15 scenes (``--paper15`` or ``$LSS_PAPER15``), or a skip."""
+    folder = request.config.getoption("--paper15")
+    if not folder or not Path(folder).is_dir():
+        pytest.skip("the paper's scenes: set LSS_PAPER15 or pass --paper15 DIR")
+    return Path(folder)

@@ -1,6 +1,5 @@
 """Images, PFM, masks and scene folders: formats, round trips and one-line errors."""
 import json
-from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
@@ -9,7 +8,6 @@ import pytest
 from lss_kernels.io import (Scene, list_scenes, load_scene, read_image, read_mask, read_pfm,
                             save_scene, write_mask, write_pfm, write_png)
 
-PAPER15 = Path(__file__).resolve().parents[1].parent / "shared/data/paper15"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -203,9 +201,8 @@ def test_list_scenes(tmp_path):
     assert [p.name for p in list_scenes(tmp_path)] == ["a", "b"]
 
 
-@pytest.mark.skipif(not PAPER15.is_dir(), reason="paper15 data not available")
-def test_load_real_scene():
-    scene = load_scene(PAPER15 / "scene03_flowerpots")
+def test_load_real_scene(paper15):
+    scene = load_scene(paper15 / "scene03_flowerpots")
     assert scene.name == "scene03_flowerpots"
     assert scene.left.shape == scene.right.shape == (155, 400, 3)
     assert scene.disp_left.shape == (155, 400) and scene.disp_left.dtype == np.float32

@@ -1,5 +1,4 @@
 """The paper's scoring protocol on hand-counted rows, against brute force, and on the release."""
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -8,7 +7,6 @@ from lss_kernels.io import Scene, load_scene
 from lss_kernels.metrics import (band_from_foreground, boundary_from_foreground,
                                  evaluation_masks, score, score_arrays)
 
-PAPER15 = Path(__file__).resolve().parents[1].parent / "shared/data/paper15"
 
 
 def row(*values, dtype=bool):
@@ -149,21 +147,19 @@ def test_score_scene_fallbacks():
         score(disp, occ, scene)
 
 
-@pytest.mark.skipif(not PAPER15.is_dir(), reason="paper15 data not available")
-def test_release_band_and_boundary_reproduced():
+def test_release_band_and_boundary_reproduced(paper15):
     """On scene 2 the release's band and boundary are exactly this module's definitions."""
-    scene = load_scene(PAPER15 / "scene02_bowling2")
+    scene = load_scene(paper15 / "scene02_bowling2")
     np.testing.assert_array_equal(boundary_from_foreground(scene.fg_left), scene.boundary)
     roi_fg, roi_bg = band_from_foreground(scene.fg_left)
     np.testing.assert_array_equal(roi_fg, scene.roi_fg)
     np.testing.assert_array_equal(roi_bg, scene.roi_bg)
 
 
-@pytest.mark.skipif(not PAPER15.is_dir(), reason="paper15 data not available")
-def test_ground_truth_scores_perfectly_on_release():
+def test_ground_truth_scores_perfectly_on_release(paper15):
     """The two-layer truth (occlusions on the background only) scores perfectly; the release's
     occ_left also marks some foreground pixels, which the protocol counts as false positives."""
-    scene = load_scene(PAPER15 / "scene03_flowerpots")
+    scene = load_scene(paper15 / "scene03_flowerpots")
     s = score(scene.disp_left, scene.occ_left & ~scene.fg_left, scene)
     assert (s["occ_f1"], s["occ_precision"], s["occ_recall"], s["bad4"]) == (1.0, 1.0, 1.0, 0.0)
     assert s["n_true_occ"] > 0 and s["n_band"] > s["n_true_occ"]

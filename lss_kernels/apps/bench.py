@@ -15,7 +15,7 @@ Outputs (``--out``): ``scaling.csv`` (one row per configuration and stage), ``sp
 
 Examples
 --------
-``lss bench --quick --json`` ; ``python demos/scaling_benchmark.py --out docs/bench``
+``lss bench --quick --json`` ; ``python demos/scaling_benchmark.py --out bench_out``
 """
 from __future__ import annotations
 

@@ -192,7 +192,7 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
     Parameters
     ----------
     dataset_dir : str or path-like
-        A folder of scene folders (see ``data/README.md``); ``paper_table1.json`` in it, if
+        A folder of scene folders (see ``docs/scene-format.md``); ``paper_table1.json`` in it, if
         present, adds the paper's numbers to ``table.md``.
     methods : sequence of str
         Any of :data:`METHOD_NAMES`.
