@@ -141,7 +141,7 @@ def main(argv=None):
     c_max = int(np.ceil(d_max / 2))
 
     # 1. the pair and the initial boundary --------------------------------------------------
-    cx, cy = init[0], init[1]
+    cy = init[1]
     row = int(round(cy))
     s.step()                                   # one iteration: messages, consensus, Theta
     snap1 = s.snapshot()

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from lss_kernels.apps import bench
+from lss_kernels.apps import bench, bench_report
 
 TINY = dict(sizes=[(56, 40)], size_d=16, disparities=[], disp_size=(56, 40),
             compare=(56, 40, 16), iterations=1, numpy_iterations=1)
@@ -88,7 +88,7 @@ def test_fit_exponent_and_plot(tmp_path):
     rows = [dict(threads="default", sweep="size", d_max=64, work=w, iteration=1e-8 * w,
                  **{f"stage_{k}": 1e-9 * w for k in bench.STAGES}) for w in work]
     result = dict(rows=rows, arch="cpu", exponents={k: 1.0 for k in bench.STAGES})
-    bench.plot(result, str(tmp_path / "p.png"))
+    bench_report.plot(result, str(tmp_path / "p.png"))
     assert (tmp_path / "p.png").read_bytes()[:4] == b"\x89PNG"
 
 

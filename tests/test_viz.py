@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from lss_kernels import viz
+from lss_kernels.apps import figures
 
 
 def _scene(h=37, w=53):
@@ -123,7 +124,7 @@ def test_overlay_marks_boundary_and_occlusion():
 def test_patch_gaussian_eq6():
     d = np.arange(0, 21, dtype=float)
     cost = np.linspace(1.0, 3.0, 21)
-    f = viz.patch_gaussian(d, cost, d_p=7.0, sigma_p=2.0)
+    f = figures.patch_gaussian(d, cost, d_p=7.0, sigma_p=2.0)
     assert f[7] == pytest.approx(1.0)            # min C at d_p
     assert f[0] == pytest.approx(3.0 - 2.0 * np.exp(-49 / 8))
     assert f.max() <= 3.0
@@ -133,16 +134,16 @@ def test_evolution_frame_and_patch_figure(tmp_path):
     left, fg, disp, occ = _scene()
     snap = dict(consensus_mean=disp, consensus_sigma=np.full(disp.shape, 0.5),
                 disparity=disp, occlusion=occ, foreground=fg, initial_foreground=fg)
-    a = viz.evolution_frame(left, snap, 16, 3, true_disparity=disp,
+    a = figures.evolution_frame(left, snap, 16, 3, true_disparity=disp,
                             scores=dict(occ_f1=0.5, bad4=0.1))
-    b = viz.evolution_frame(left, snap, 16, 4, true_disparity=disp)
+    b = figures.evolution_frame(left, snap, 16, 4, true_disparity=disp)
     assert a.shape == b.shape and a.dtype == np.uint8 and a.shape[1] == 5 * 240
-    c = viz.evolution_frame(left, snap, 16, 4)
+    c = figures.evolution_frame(left, snap, 16, 4)
     assert c.shape[1] == 4 * 240
     d = np.arange(0, 17, dtype=float)
     curve = dict(d=d, cost=(d - 8) ** 2 / 64, matching_cost=np.abs(d - 9) / 9, d_p=8.0,
                  sigma_p=2.0, valid=True, mean_D=8.5)
-    fig = viz.patch_message_figure([(0, curve), (5, dict(curve, valid=False))], left=left,
+    fig = figures.patch_message_figure([(0, curve), (5, dict(curve, valid=False))], left=left,
                                    patch_box=(10, 10, 9), title="patch")
     out = iio.imread(viz.save_figure(fig, tmp_path / "patch.png"))
     assert out.ndim == 3 and out.shape[0] > 100

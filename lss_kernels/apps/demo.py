@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from .. import viz
+from . import figures
 
 __all__ = ["run_demo", "add_cli", "main_demo", "parse_init", "parse_patch", "default_patch",
            "recorded_iterations"]
@@ -177,7 +178,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
     def record(snapshot):
         it = solver.iteration
         scores = _scores(snapshot, scene)
-        frame = viz.evolution_frame(left, snapshot, d_max, it, true_disparity=true_disp,
+        frame = figures.evolution_frame(left, snapshot, d_max, it, true_disparity=true_disp,
                                     scores=scores)
         path = os.path.join(frames_dir, f"frame_{len(frame_paths):04d}.png")
         viz.save_rgb_png(path, frame)
@@ -217,7 +218,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
         last_curve.get("mean_D", np.nan)) else 0.0
     shown = max(patch_size, w // 40)     # a tiny patch on a large image: outline it larger
     box = (px + shift - shown // 2, py - shown // 2, shown)
-    fig = viz.patch_message_figure(
+    fig = figures.patch_message_figure(
         curves, left=left, patch_box=box,
         title=(f"disparity message of the {patch_size}x{patch_size} patch at cyclopean "
                f"({px}, {py}), level {plevel} (Fig. 1a)"))

@@ -21,7 +21,6 @@ ellipse) and the OpenCV peers of :mod:`lss_kernels.apps.baselines` (``sgm``, ``b
 """
 from __future__ import annotations
 
-import csv
 import json
 import os
 import sys
@@ -36,15 +35,14 @@ import numpy as np
 from .. import io, metrics
 from .baselines import METHODS as BASELINES, require_opencv
 from ..params import c_max
-from ..stopping import StopRule, replay
+from ..stopping import StopRule
+from . import reports
+from .reports import COLUMNS
 
 __all__ = ["COLUMNS", "METHOD_NAMES", "add_cli", "main_eval", "run_eval"]
 
 #: Every method ``run_eval`` knows, in table order.
 METHOD_NAMES = ("lss",) + tuple(BASELINES)
-#: Columns of ``results.csv``.
-COLUMNS = ("scene", "method", "occ_f1", "occ_precision", "occ_recall", "bad4", "seconds")
-_MEANS = ("occ_f1", "occ_precision", "occ_recall", "bad4", "seconds")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -270,12 +268,12 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
     records.update(fresh)
 
     rows = [records[n, m] for n in names for m in methods]
-    _write_csv(out / "results.csv", rows, methods)
-    _write_table(out / "table.md", rows, names, methods, Path(dataset_dir))
+    reports.write_csv(out / "results.csv", rows, methods)
+    reports.write_table(out / "table.md", rows, names, methods, Path(dataset_dir))
     for scene_dir in scene_dirs:
         panel = out / "panels" / f"{scene_dir.name}.png"
         if any((scene_dir.name, m) in fresh for m in methods) or not panel.exists():
-            _write_panel(panel, scene_dir, [records[scene_dir.name, m] for m in methods], out)
+            reports.write_panel(panel, scene_dir, [records[scene_dir.name, m] for m in methods], out)
     traced = [r for r in rows if r["method"] == "lss" and r.get("trace")]
     if trace and "lss" in methods:
         missing = [r["scene"] for r in rows if r["method"] == "lss" and not r.get("trace")]
@@ -284,7 +282,7 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
                   f"left out of convergence.md (use --force to trace them)", file=sys.stderr)
         if traced:
             from ..params import Params
-            _write_convergence(out, traced, params if params is not None else Params(),
+            reports.write_convergence(out, traced, params if params is not None else Params(),
                                missing)
     return rows
 
@@ -329,185 +327,6 @@ class _Progress:
         print(f"[{self.count}/{self.total}] {record['scene']} {record['method']}: "
               f"F1 {record['occ_f1']:.2f}, bad-4.0 {record['bad4']:.1f} % ({how})",
               file=sys.stderr, flush=True)
-
-
-# ---------------------------------------------------------------------------------------------
-# Reports
-# ---------------------------------------------------------------------------------------------
-
-def _means(rows, method: str) -> dict:
-    mine = [r for r in rows if r["method"] == method]
-    return {k: float(np.mean([r[k] for r in mine])) for k in _MEANS}
-
-
-def _write_csv(path: Path, rows, methods) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(COLUMNS)
-        for row in rows:
-            writer.writerow([row["scene"], row["method"]]
-                            + [f"{row[k]:.6g}" for k in COLUMNS[2:]])
-        for method in methods:
-            mean = _means(rows, method)
-            writer.writerow(["mean", method] + [f"{mean[k]:.6g}" for k in COLUMNS[2:]])
-
-
-def _paper_label(key: str) -> str:
-    return key if "paper" in key else f"{key} (paper)"
-
-
-def _write_table(path: Path, rows, names, methods, dataset_dir: Path) -> None:
-    """Markdown table: rows = scenes, columns = occlusion F1 per method, then the paper's."""
-    paper_file = dataset_dir / "paper_table1.json"
-    paper = json.loads(paper_file.read_text()) if paper_file.exists() else {}
-    numbers = {}
-    for name in names:
-        meta_file = dataset_dir / name / "meta.json"
-        meta = json.loads(meta_file.read_text()) if meta_file.exists() else {}
-        numbers[name] = meta.get("paper_scene")
-    by_key = {(r["scene"], r["method"]): r for r in rows}
-    fmt = lambda v, spec: "–" if v is None else format(v, spec)
-
-    def paper_f1(key, name):
-        n = numbers[name]
-        table = paper[key]["occ_f1"]
-        return table[n - 1] if n is not None and 1 <= n <= len(table) else None
-
-    header = ["scene"] + list(methods) + [_paper_label(k) for k in paper]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for name in names:
-        label = name if numbers[name] is None else f"{numbers[name]}: {name}"
-        cells = [fmt(by_key[name, m]["occ_f1"], ".2f") for m in methods]
-        cells += [fmt(paper_f1(k, name), ".2f") for k in paper]
-        lines.append("| " + " | ".join([label] + cells) + " |")
-    means = {m: _means(rows, m) for m in methods}
-    paper_means = []
-    for key in paper:
-        values = [v for v in (paper_f1(key, n) for n in names) if v is not None]
-        paper_means.append(float(np.mean(values)) if values else None)
-    lines.append("| **mean F1** | " + " | ".join(
-        [fmt(means[m]["occ_f1"], ".2f") for m in methods]
-        + [fmt(v, ".2f") for v in paper_means]) + " |")
-    lines.append("| **mean bad-4.0 (%)** | " + " | ".join(
-        [fmt(means[m]["bad4"], ".2f") for m in methods]
-        + [fmt(paper[k].get("avg_bad4"), ".2f") for k in paper]) + " |")
-    lines.append("| **seconds per scene** | " + " | ".join(
-        [fmt(means[m]["seconds"], ".2f") for m in methods] + ["–"] * len(paper)) + " |")
-    text = [f"# Occlusion F1 on {dataset_dir.name} ({len(names)} scenes)", ""] + lines
-    if paper:
-        text += ["", "Paper columns: Table 1 of the paper; their mean F1 is over the scenes "
-                 "above, their mean bad-4.0 is the paper's own average over its 15 scenes."]
-    for m in methods:
-        text += ["", f"## {m}, per scene", "",
-                 "| scene | occlusion F1 | precision | recall | bad-4.0 (%) | seconds | "
-                 "iterations |", "|---|---|---|---|---|---|---|"]
-        for name in names:
-            r = by_key[name, m]
-            text.append(f"| {name} | {r['occ_f1']:.2f} | {r['occ_precision']:.2f} | "
-                        f"{r['occ_recall']:.2f} | {r['bad4']:.1f} | {r['seconds']:.1f} | "
-                        f"{r.get('iterations', '–')} |")
-        text.append(f"| **mean** | {means[m]['occ_f1']:.3f} | {means[m]['occ_precision']:.2f} | "
-                    f"{means[m]['occ_recall']:.2f} | {means[m]['bad4']:.2f} | "
-                    f"{means[m]['seconds']:.1f} | |")
-    path.write_text("\n".join(text) + "\n")
-
-
-#: Variants of the stopping rule that ``convergence.md`` replays, as multiples of the run's
-#: ``stop_fraction`` and ``min_iterations``.
-RULE_VARIANTS = ((1.0, 1.0), (1.0, 0.5), (1.5, 1.0), (1.5, 0.5), (2.5, 1.0), (5.0, 1.0))
-
-
-def _write_convergence(out: Path, records, params, missing=()) -> None:
-    """convergence.csv / .md / .png from the traces of ``lss`` runs (see ``run_eval``);
-    ``missing``: the scenes whose lss run has no trace."""
-    from .. import viz
-    keys = ("iteration", "moving_fraction", "fg_fraction", "occ_f1", "bad4")
-    with open(out / "convergence.csv", "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(("scene",) + keys)
-        for r in records:
-            for row in r["trace"]:
-                writer.writerow([r["scene"]] + [f"{row[k]:.6g}" for k in keys])
-
-    last = max(r["trace"][-1]["iteration"] for r in records)
-    # columns every ~100 iterations, on the recorded window ends
-    step = params.stop_window * max(1, round(100 / params.stop_window))
-    marks = list(range(step, last + 1, step))
-    text = ["# Accuracy against iterations (lss)", "",
-            f"Occlusion F1 every {step} iterations (blank: the run had stopped) and at the "
-            "run's own stop.", "",
-            "| scene | " + "".join(f"{m} | " for m in marks) + "stop | F1 |",
-            "|---|" + "---|" * (len(marks) + 2)]
-    for r in records:
-        at = {row["iteration"]: row["occ_f1"] for row in r["trace"]}
-        cells = "".join((f"{at[m]:.2f}" if m in at else "") + " | " for m in marks)
-        text.append(f"| {r['scene']} | {cells}"
-                    f"{r['trace'][-1]['iteration']} | {r['trace'][-1]['occ_f1']:.2f} |")
-    if missing:
-        text += ["", f"Not traced (finished by an earlier call without --trace; rerun them "
-                     f"with --force): {', '.join(missing)}."]
-    text += ["", "## Variants of the stopping rule, replayed on these runs", "",
-             f"The runs used stop_fraction {params.stop_fraction}, min_iterations "
-             f"{params.min_iterations}, stop_window {params.stop_window}, stop_patience "
-             f"{params.stop_patience}. A variant can only be replayed up to where the run "
-             "stopped: *ended* counts the runs whose record ended before the variant fired.",
-             "", "| stop_fraction | min_iterations | median iterations | total iterations | "
-             "mean F1 | mean bad-4.0 (%) | ended |", "|---|---|---|---|---|---|---|"]
-    for f_scale, m_scale in RULE_VARIANTS:
-        change = dict(stop_fraction=params.stop_fraction * f_scale,
-                      min_iterations=max(1, int(params.min_iterations * m_scale)))
-        if not change["stop_fraction"] < 1:
-            continue                                    # not a valid Params.stop_fraction
-        stops = [replay(r["trace"], params, **change) for r in records]
-        its = [e["iteration"] for e, _ in stops]
-        text.append(f"| {change['stop_fraction']:.4g} | {change['min_iterations']} | "
-                    f"{np.median(its):.0f} | {sum(its)} | "
-                    f"{np.mean([e['occ_f1'] for e, _ in stops]):.4f} | "
-                    f"{np.mean([e['bad4'] for e, _ in stops]):.2f} | "
-                    f"{sum(not fired for _, fired in stops)} |")
-    (out / "convergence.md").write_text("\n".join(text) + "\n")
-
-    fig = viz.new_figure(720, 420)
-    ax = fig.add_axes((0.08, 0.12, 0.62, 0.8))
-    for r in records:
-        ax.plot([row["iteration"] for row in r["trace"]],
-                [row["occ_f1"] for row in r["trace"]], label=r["scene"], linewidth=1)
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("occlusion F1")
-    ax.set_ylim(0, 1)
-    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    viz.save_figure(fig, out / "convergence.png")
-
-
-def _write_panel(path: Path, scene_dir: Path, records, out: Path) -> None:
-    """Left image, true disparity and each method's disparity with occlusions in dark blue."""
-    from .. import viz
-    scene = io.load_scene(scene_dir)
-    truth = np.asarray(scene.disp_left, dtype=np.float32)
-    finite = truth[np.isfinite(truth)]
-    vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
-    vmax = max(vmax, vmin + 1.0)
-    h, w = truth.shape
-    tiles = [(scene.left, "left image"),
-             (viz.occlusion_disparity_rgb(truth, scene.occ_left, vmin, vmax), "ground truth")]
-    for record in records:
-        run = out / "runs" / scene_dir.name / record["method"]
-        disparity = io.read_pfm(run / "disparity.pfm")
-        occlusion = io.read_mask(run / "occlusion.png")
-        tiles.append((viz.occlusion_disparity_rgb(disparity, occlusion, vmin, vmax),
-                      f"{record['method']}: F1 {record['occ_f1']:.2f}, "
-                      f"bad-4.0 {record['bad4']:.1f} %"))
-    tile_w = 320
-    tile_h = max(1, round(tile_w * h / w))
-    fig = viz.new_figure(tile_w * len(tiles), tile_h + 28)
-    for i, (rgb, title) in enumerate(tiles):
-        ax = fig.add_axes((i / len(tiles), 0, 1 / len(tiles), tile_h / (tile_h + 28)))
-        ax.imshow(rgb, interpolation="nearest", aspect="auto")
-        ax.set_axis_off()
-        ax.set_title(title, fontsize=8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    viz.save_figure(fig, path)
 
 
 # ---------------------------------------------------------------------------------------------
