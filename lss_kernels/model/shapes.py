@@ -57,7 +57,8 @@ class GlobalShapes:
         self.cx, self.cy = (self.W - 1) / 2.0, (self.H - 1) / 2.0
         self.inv_s = 1.0 / (max(self.H, self.W) / 2.0)
         self.theta = pool.field(ti.f32, (2, NB))
-        self.updated = pool.field(ti.i32, (2,))
+        self.updated = pool.field(ti.i32, (2,))   # the last fit changed the shape
+        self.fitted = pool.field(ti.i32, (2,))    # the shape has been fitted at least once
         self.rows = pool.field(ti.f32, (2,))
         # reduction levels: tiles of TILE x TILE children until one cell is left
         self.tiles = []
@@ -76,6 +77,34 @@ class GlobalShapes:
         t0, t1, t2 = self.theta[j, 0], self.theta[j, 1], self.theta[j, 2]
         t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
         return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
+
+    @ti.func
+    def huber_weight(self, j, x, y, d, k: ti.template()):
+        """The weight of a row of region ``j``'s fit with target ``d`` at pixel (x, y) in
+        iteratively reweighted least squares with Huber's loss of threshold ``k`` (cyclopean
+        units; a compile-time constant): min(1, k / |d - Theta_j(x, y)|) against the current
+        shape, 1 before the region's first fit (or with ``k`` = 0: plain least squares).
+        The loss is convex, so the reweighting converges to the surface that most weighted
+        rows lie on, whatever the starting shape: a part of the other layer inside a region
+        cannot turn its surface around."""
+        w = 1.0
+        if ti.static(k > 0):
+            if self.fitted[j] == 1:
+                r = ti.abs(d - self.value(j, ti.cast(x, ti.f32), ti.cast(y, ti.f32)))
+                w = ti.min(1.0, k / ti.max(r, 1e-6))
+        return w
+
+    @ti.func
+    def closer_to(self, j, x, y, d):
+        """1 when the target ``d`` at pixel (x, y) lies at least as close to Theta_j as to
+        the other shape (or the other shape has never been fitted), else 0: a row of region
+        ``j`` whose value belongs to the other layer is left out of region ``j``'s fit."""
+        keep = 1.0
+        if self.fitted[1 - j] == 1 and self.fitted[j] == 1:
+            xf, yf = ti.cast(x, ti.f32), ti.cast(y, ti.f32)
+            if ti.abs(d - self.value(j, xf, yf)) > ti.abs(d - self.value(1 - j, xf, yf)):
+                keep = 0.0
+        return keep
 
     @ti.func
     def _from_pixels(self, weights: ti.template(), target: ti.template(), out: ti.template()):
@@ -177,6 +206,8 @@ class GlobalShapes:
                 for a in ti.static(range(NB)):
                     self.theta[j, a] = sol[a]
             self.updated[j] = ok
+            if ok == 1:
+                self.fitted[j] = 1
 
     @ti.kernel
     def fit(self, weights: ti.template(), target: ti.template()):

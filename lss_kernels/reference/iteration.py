@@ -78,6 +78,7 @@ class IterationState:
     delta_theta: np.ndarray
     theta: np.ndarray
     iteration: int = 0
+    fitted: tuple = (False, False)
     extra: dict = field(default_factory=dict)
 
     @property
@@ -110,6 +111,7 @@ def state_from_solver(solver) -> IterationState:
         edge_right=f64(solver.costs.edge_right), phi=f64(solver.levelset.phi),
         D=f64(solver.levelset.D), delta_theta=f64(solver.occ.delta_theta),
         theta=f64(solver.shapes.theta), iteration=int(solver.iteration),
+        fitted=tuple(bool(v) for v in solver.shapes.fitted.to_numpy()),
         extra=dict(consensus_mean=f64(h.consensus_mean), precision=prec,
                    phi_plus=f64(solver.occ.phi_plus)))
 
@@ -182,11 +184,17 @@ def iteration(state: IterationState, params):
     w = np.where((x - mean < 0) | (x + mean > W - 1), 0.0, w)
     w_fg = np.where(phi >= 0, w, 0.0)
     w_bg = np.where((phi < 0) & (phi_plus < 0), w, 0.0)
+    previous = [theta_map(t) for t in state.theta]
     theta = np.array(state.theta, np.float64, copy=True)
     updated = []
     for j, wj in enumerate((w_fg, w_bg)):
+        if state.fitted[j]:
+            wj = wj * ref.huber_weight(mean - previous[j], 0.5 * p.robust_fit)
+        if p.exclusive_fit and state.fitted[0] and state.fitted[1]:
+            wj = np.where(np.abs(mean - previous[j]) > np.abs(mean - previous[1 - j]), 0.0, wj)
         theta[j], ok = ref.fit_shape(wj, mean, theta[j])
         updated.append(ok)
+    fitted = tuple(bool(f or u) for f, u in zip(state.fitted, updated))
     now = time.perf_counter()
     seconds["shapes"], t = now - t, now
 
@@ -219,7 +227,7 @@ def iteration(state: IterationState, params):
 
     extra = dict(consensus_mean=mean, precision=precision, d_p=d_p, sigma_p=sigma_p,
                  valid=valid, phi_plus=phi_plus, updated=updated, flipped=flipped, area=area)
-    return replace(state, phi=phi_new, D=D, delta_theta=delta_theta, theta=theta,
+    return replace(state, phi=phi_new, D=D, delta_theta=delta_theta, theta=theta, fitted=fitted,
                    iteration=it, extra=extra), seconds
 
 
