@@ -10,12 +10,8 @@ left in ``--out`` (results are written to a temporary folder that is moved into 
 """
 import argparse
 import importlib
-import json
 import os
-import shutil
 import sys
-import tempfile
-import time
 
 if "--json" in sys.argv[1:]:
     # stdout carries one JSON object: no Taichi banner when backend imports Taichi
@@ -137,69 +133,26 @@ class Progress:
             self.bar.stop()
 
 
-def write_outputs(out_dir, result, left, params, extra=None):
-    """Write the result files into ``out_dir`` atomically (temporary folder, then rename)."""
-    import numpy as np
-    from .. import io, viz
-    parent = os.path.dirname(os.path.abspath(out_dir)) or "."
-    os.makedirs(parent, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=".lss-", dir=parent)
-    try:
-        io.write_pfm(os.path.join(tmp, "disparity.pfm"), result.disparity)
-        io.write_mask(os.path.join(tmp, "occlusion.png"), result.occlusion)
-        io.write_mask(os.path.join(tmp, "foreground.png"), result.foreground)
-        viz.save_disparity_png(os.path.join(tmp, "disparity.png"), result.disparity,
-                               vmin=0.0, occlusion=result.occlusion)
-        viz.save_overlay_png(os.path.join(tmp, "overlay.png"), left, result.foreground,
-                             result.occlusion)
-        summary = dict(iterations=result.iterations, stop_reason=result.stop_reason,
-                       seconds=round(result.timings.get("total", 0.0), 3),
-                       timings={k: round(v, 4) for k, v in result.timings.items()},
-                       theta_fg=np.round(result.theta_fg, 10).tolist(),
-                       theta_bg=np.round(result.theta_bg, 10).tolist(),
-                       theta_basis="left-view disparity over {x^2, xy, y^2, x, y, 1}, raw "
-                                   "cyclopean pixel coordinates",
-                       params=params.to_dict())
-        summary.update(extra or {})
-        with open(os.path.join(tmp, "summary.json"), "w") as f:
-            json.dump(summary, f, indent=1)
-        if os.path.isdir(out_dir):
-            shutil.rmtree(out_dir)
-        os.replace(tmp, out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return summary
-
-
 def main_solve(args):
     from ..kernels import backend
-    from ..solver import Solver
+    from .jobs import Job, run_job
     params = _params(args)
     left, right, d_max, init, init_frame, scene = _inputs(args)
-    arch = backend.init(arch=args.arch, threads=args.threads)
-    t0 = time.perf_counter()
-    solver = Solver(left, right, d_max, init, params=params, init_frame=init_frame)
+    backend.init(arch=args.arch, threads=args.threads)
+    has_truth = scene is not None and scene.disp_left is not None and scene.occ_left is not None
+    name = scene.name if scene is not None else os.path.basename(os.path.abspath(args.out))
+    job = Job(name, left, right, d_max, init, init_frame, scene if has_truth else None)
     progress = Progress(params.max_iterations, args.quiet)
     try:
-        result = solver.run(progress)
+        summary = run_job(job, args.out, params, callback=progress)
     finally:
         progress.close()
-    left_img = solver.left_image
-    solver.close()
-    extra = {"wall_seconds": round(time.perf_counter() - t0, 3), "d_max": float(d_max),
-             "arch": arch}
-    if scene is not None and scene.disp_left is not None and scene.occ_left is not None:
-        from ..metrics import score
-        extra["score"] = {k: (float(v) if hasattr(v, "__float__") else v)
-                          for k, v in score(result.disparity, result.occlusion, scene).items()}
-    summary = write_outputs(args.out, result, left_img, params, extra)
     if not args.quiet:
-        line = (f"lss solve: {result.iterations} iterations ({result.stop_reason}), "
+        line = (f"lss solve: {summary['iterations']} iterations ({summary['stop_reason']}), "
                 f"{summary['wall_seconds']} s -> {args.out}")
-        if "score" in extra:
-            line += (f"  occlusion F1 {extra['score']['occ_f1']:.3f}, "
-                     f"bad-4.0 {extra['score']['bad4']:.2f}%")
+        if "score" in summary:
+            line += (f"  occlusion F1 {summary['score']['occ_f1']:.3f}, "
+                     f"bad-4.0 {summary['score']['bad4']:.2f}%")
         print(line)
     return 0
 

@@ -1,0 +1,172 @@
+"""One stereo pair solved into an output folder: what ``lss solve`` does for one pair and
+``lss batch`` for each of many.
+
+A :class:`Job` names the pair and how to start; :func:`run_job` solves it (reusing a cached
+solver of the same image size and search range, :class:`SolverCache`) and writes the folder
+with :func:`write_outputs`::
+
+    disparity.pfm    left-view disparity (float32 PFM)
+    occlusion.png    left-view occlusion mask (255 = seen by the left camera only)
+    foreground.png   left-view foreground mask
+    disparity.png    colour map with occlusions in dark blue and a colour bar
+    overlay.png      boundary and occlusions over the left image
+    summary.json     iterations, stop reason, seconds, Theta_1, Theta_2, parameters, the
+                     score when the pair has ground truth
+
+The folder is written to a temporary sibling and renamed into place, so a folder that exists
+is complete.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Job", "SolverCache", "job_from_scene", "run_job", "write_outputs"]
+
+
+@dataclass
+class Job:
+    """A pair to solve.
+
+    Attributes
+    ----------
+    name : str
+        The name of its output folder.
+    left, right : array or path
+        The rectified pair (left image = reference).
+    d_max : float
+        Largest disparity to search, left-view pixels.
+    init : tuple, array or str
+        The initial foreground (see :class:`lss_kernels.Solver`).
+    init_frame : {"left", "cyclopean"}
+    scene : lss_kernels.io.Scene or None
+        The scene with its ground truth, to score the result (None: no score).
+    """
+
+    name: str
+    left: Any
+    right: Any
+    d_max: float
+    init: Any
+    init_frame: str = "left"
+    scene: Any = None
+
+
+def job_from_scene(scene, d_max=None, init=None):
+    """The :class:`Job` of a scene (:class:`lss_kernels.io.Scene`, or a folder): its own
+    initial ellipse (cyclopean when the folder gives one) unless ``init`` is given."""
+    from .. import io
+    if not isinstance(scene, io.Scene):
+        scene = io.load_scene(scene)
+    d_max = float(scene.d_max if d_max is None else d_max)
+    if init is not None:
+        init, frame = init, "left"
+    elif scene.init_ellipse_cyclopean is not None:
+        init, frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
+    else:
+        init, frame = tuple(scene.init_ellipse), "left"
+    has_truth = scene.disp_left is not None and scene.occ_left is not None
+    return Job(scene.name, scene.left, scene.right, d_max, init, frame,
+               scene if has_truth else None)
+
+
+class SolverCache:
+    """Keeps the last solver for the next job of the same image size, search range and
+    parameters (:meth:`lss_kernels.Solver.reset`: no kernels to load again), and closes it
+    when another one is needed."""
+
+    def __init__(self, restart_taichi=False):
+        self.key, self.solver = None, None
+        self.restart_taichi = restart_taichi
+
+    def solve(self, job, params, callback=None):
+        """Solve ``job`` with a reused or new solver; returns ``(result, solver)``."""
+        from ..params import c_max
+        from ..solver import Solver
+        from ..validate import check_inputs
+        left, right, d_max, init = check_inputs(job.left, job.right, job.d_max, job.init,
+                                                job.init_frame, params)
+        key = (left.shape[:2], c_max(d_max), params)
+        if key == self.key:
+            self.solver.reset(left, right, d_max, init, init_frame=job.init_frame)
+        else:
+            self.close()
+            if self.restart_taichi:
+                from ..kernels import backend
+                backend.restart()
+            self.solver = Solver(left, right, d_max, init, params=params,
+                                 init_frame=job.init_frame)
+            self.key = key
+        return self.solver.run(callback), self.solver
+
+    def close(self):
+        if self.solver is not None:
+            self.solver.close()
+        self.key, self.solver = None, None
+
+
+def run_job(job, out_dir, params, cache=None, callback=None, extra=None):
+    """Solve ``job`` and write its folder ``out_dir``; returns the summary (the content of
+    ``summary.json``).  ``cache``: a :class:`SolverCache` to reuse (else a solver of its own,
+    closed before returning); ``callback(solver, stats)`` after every iteration."""
+    from ..kernels import backend
+    own = cache is None
+    cache = SolverCache() if own else cache
+    start = time.perf_counter()
+    try:
+        result, solver = cache.solve(job, params, callback)
+        left = solver.left_image
+    finally:
+        if own:
+            cache.close()
+    info = {"name": job.name, "wall_seconds": round(time.perf_counter() - start, 3),
+            "d_max": float(job.d_max), "arch": backend.current_arch()}
+    if job.scene is not None:
+        from ..metrics import score
+        info["score"] = {k: (float(v) if hasattr(v, "__float__") else v)
+                         for k, v in score(result.disparity, result.occlusion, job.scene).items()}
+    info.update(extra or {})
+    return write_outputs(out_dir, result, left, params, info)
+
+
+def write_outputs(out_dir, result, left, params, extra=None):
+    """Write the result files into ``out_dir`` atomically (a temporary sibling folder, then
+    renamed into place); returns the summary."""
+    from .. import io, viz
+    out_dir = os.fspath(out_dir)
+    parent = os.path.dirname(os.path.abspath(out_dir)) or "."
+    os.makedirs(parent, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix=".lss-", dir=parent)
+    try:
+        io.write_pfm(os.path.join(tmp, "disparity.pfm"), result.disparity)
+        io.write_mask(os.path.join(tmp, "occlusion.png"), result.occlusion)
+        io.write_mask(os.path.join(tmp, "foreground.png"), result.foreground)
+        viz.save_disparity_png(os.path.join(tmp, "disparity.png"), result.disparity,
+                               vmin=0.0, occlusion=result.occlusion)
+        viz.save_overlay_png(os.path.join(tmp, "overlay.png"), left, result.foreground,
+                             result.occlusion)
+        summary = dict(iterations=result.iterations, stop_reason=result.stop_reason,
+                       seconds=round(result.timings.get("total", 0.0), 3),
+                       timings={k: round(v, 4) for k, v in result.timings.items()},
+                       theta_fg=np.round(result.theta_fg, 10).tolist(),
+                       theta_bg=np.round(result.theta_bg, 10).tolist(),
+                       theta_basis="left-view disparity over {x^2, xy, y^2, x, y, 1}, raw "
+                                   "cyclopean pixel coordinates",
+                       params=params.to_dict())
+        summary.update(extra or {})
+        with open(os.path.join(tmp, "summary.json"), "w") as f:
+            json.dump(summary, f, indent=1)
+        if os.path.isdir(out_dir):
+            shutil.rmtree(out_dir)
+        os.replace(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return summary
