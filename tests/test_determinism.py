@@ -26,7 +26,8 @@ FIELDS = ("disparity", "occlusion", "foreground", "phi", "consensus_mean", "cons
 SCRIPT = textwrap.dedent("""
     import sys
     import numpy as np
-    from lss_kernels import Params, backend, solve
+    from lss_kernels import Params, solve
+    from lss_kernels.kernels import backend
     from lss_kernels.scenes import make_scene
 
     scene = make_scene("tiny", seed=3, noise=0.02)
