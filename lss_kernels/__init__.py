@@ -1,11 +1,12 @@
 """lss_kernels: two-layer level-set stereo with exact occlusion geometry (Wang & Zickler).
 
-Public API: :func:`solve`, :class:`Solver`, :class:`Params`, :class:`Result`.
+Public API: :func:`solve`, :class:`Solver`, :class:`Params`, :class:`Result`, and the
+initialisations :class:`Point` and :class:`Box` (or ``init="auto"``).
 Importing the package does not initialise Taichi; :func:`lss_kernels.kernels.backend.init` does.
 """
 from .params import Params
 
-__all__ = ["Params", "Result", "Solver", "solve", "__version__"]
+__all__ = ["Box", "Params", "Point", "Result", "Solver", "solve", "__version__"]
 __version__ = "0.1.0"
 
 
@@ -14,4 +15,7 @@ def __getattr__(name):
     if name in ("Result", "Solver", "solve"):
         from . import solver
         return getattr(solver, name)
+    if name in ("Point", "Box"):
+        from .model import init
+        return getattr(init, name)
     raise AttributeError(name)

@@ -230,9 +230,9 @@ class Scene:
         Rectified pair in ``[0, 1]``; the left image is the reference.
     d_max : float
         Largest disparity to search, in left-view pixels.
-    init_ellipse : tuple of float
+    init_ellipse : tuple of float or None
         ``(cx, cy, rx, ry)``: the initial boundary in left-view pixel coordinates (0-based,
-        x to the right, y down).
+        x to the right, y down); None: the solvers find one (``init="auto"``).
     init_ellipse_cyclopean : tuple of float or None
         The same ellipse in the cyclopean frame, when known.
     disp_left : ndarray, float32, shape (H, W), or None
@@ -250,7 +250,7 @@ class Scene:
     left: np.ndarray
     right: np.ndarray
     d_max: float
-    init_ellipse: tuple
+    init_ellipse: tuple | None
     init_ellipse_cyclopean: tuple | None = None
     disp_left: np.ndarray | None = None
     fg_left: np.ndarray | None = None
@@ -283,9 +283,8 @@ def _read_meta(folder: Path) -> dict:
         raise ValueError(f"scene {folder}: meta.json is not valid JSON ({exc})") from exc
     if not isinstance(meta, dict):
         raise ValueError(f"scene {folder}: meta.json should hold an object, got {type(meta).__name__}")
-    for key in ("d_max", "init_ellipse"):
-        if key not in meta:
-            raise ValueError(f"scene {folder}: meta.json has no '{key}'")
+    if "d_max" not in meta:
+        raise ValueError(f"scene {folder}: meta.json has no 'd_max'")
     return meta
 
 
@@ -295,7 +294,7 @@ def load_scene(folder) -> Scene:
     Parameters
     ----------
     folder : str or path-like
-        Holds ``left.png``, ``right.png`` and ``meta.json`` (with ``d_max`` and
+        Holds ``left.png``, ``right.png`` and ``meta.json`` (with ``d_max`` and optionally
         ``init_ellipse``); the ground-truth files are optional.
 
     Returns
@@ -331,7 +330,8 @@ def load_scene(folder) -> Scene:
     return Scene(
         name=str(meta.get("name", folder.name)), left=left, right=right,
         d_max=float(meta["d_max"]),
-        init_ellipse=_ellipse(meta["init_ellipse"], f"scene {folder}: init_ellipse"),
+        init_ellipse=(None if meta.get("init_ellipse") is None else
+                      _ellipse(meta["init_ellipse"], f"scene {folder}: init_ellipse")),
         init_ellipse_cyclopean=(None if cyc is None else
                                 _ellipse(cyc, f"scene {folder}: init_ellipse_cyclopean")),
         disp_left=check(read_pfm(disp), "disp_left.pfm") if disp.is_file() else None,

@@ -81,6 +81,11 @@ class Params:
         (iteratively reweighted least squares of a convex loss, near L1 beyond k), so that
         the part of the other layer inside a region, or wrong matches, cannot turn a surface
         around.  0: plain least squares, the paper's Eq. 8.
+    matching_cost : {"ad", "ad_census"}
+        The pixel matching cost M (:mod:`lss_kernels.model.matching`): "ad", the paper's
+        absolute colour difference, or "ad_census", AD-Census (census of 7x7 grey windows
+        beside the colour difference), which matches dark, low-contrast and radiometrically
+        different views as sharply as bright ones.
     exclusive_fit : bool
         A row whose consensus lies nearer the other layer's current surface than its own
         region's is left out of its region's fit (a hard assignment of the alternation, as
@@ -117,6 +122,7 @@ class Params:
     mono_threshold: float = 0.08
     shape_weight_power: int = 2
     robust_fit: float = 0.0
+    matching_cost: str = "ad"
     exclusive_fit: bool = False
     subpixel_messages: bool = True
 
@@ -160,6 +166,9 @@ class Params:
         need("mono_threshold", pos, "a finite number > 0")
         need("shape_weight_power", lambda v: v in (1, 2), "1 (the paper) or 2 (the release)")
         need("robust_fit", nonneg, "a finite number >= 0 (0: plain least squares)")
+        if self.matching_cost not in ("ad", "ad_census"):
+            raise ValueError(f"params.matching_cost: expected 'ad' or 'ad_census', got "
+                             f"{self.matching_cost!r}")
         if not isinstance(self.exclusive_fit, bool):
             raise ValueError(f"params.exclusive_fit: expected True or False, got "
                              f"{self.exclusive_fit!r}")

@@ -28,7 +28,9 @@ from .kernels.backend import FieldPool
 from .model import STAGES
 from .model.costs import BoundaryCosts
 from .model.hierarchy import PatchHierarchy
+from .model.init import InitialRegion
 from .model.levelset import LevelSet
+from .model.matching import MatchingCost
 from .model.messages import Messages
 from .model.occlusion import OcclusionGeometry
 from .params import Params, c_max
@@ -80,8 +82,9 @@ class Solver:
         Rectified pair; the left image is the reference.
     d_max : float
         Largest disparity to search, in left-view pixels (cyclopean ``c_max = ceil(d_max/2)``).
-    init : tuple ``(cx, cy, rx, ry)`` or boolean array ``(H, W)``
-        Initial foreground: an ellipse or a mask, in the frame ``init_frame``.
+    init : tuple ``(cx, cy, rx, ry)``, boolean array ``(H, W)``, ``"auto"``, Point or Box
+        Initial foreground: an ellipse or a mask, in the frame ``init_frame``; or found from
+        the first consensus (:mod:`lss_kernels.model.init`; ``init_info`` says what was chosen).
     params : Params, optional
     arch : str, optional
         Taichi arch; initialises Taichi if given (else uses the current one, or the CPU).
@@ -121,10 +124,12 @@ class Solver:
         self.pool = pool
         self.left = pool.vector(3, ti.f32, (H, W))
         self.right = pool.vector(3, ti.f32, (H, W))
+        self.matching = MatchingCost(pool, H, W, self.params.matching_cost)
         self.hierarchy = PatchHierarchy(pool, H, W, C, self.params.patch_sizes)
         self.messages = Messages(self.hierarchy, self.params.subpixel_messages)
         self.costs = BoundaryCosts(pool, H, W, C)
         self.shapes = GlobalShapes(pool, H, W)
+        self.initialiser = InitialRegion(pool, H, W)
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, self.params)
         pool.finalize()
@@ -161,7 +166,8 @@ class Solver:
         self.right.from_numpy(right)
 
         t0 = time.perf_counter()
-        self.hierarchy.build_costs(self.left, self.right)
+        self.matching.setup(self.left, self.right)
+        self.hierarchy.build_costs(self.matching, self.left, self.right)
         self.costs.build(self.hierarchy.matching_cost, self.left, self.right, self.params)
         ti.sync()
         self.timings = {"setup_costs": time.perf_counter() - t0}
@@ -186,6 +192,13 @@ class Solver:
         Frames differ by half the foreground's disparity (x_left = x_c + c), estimated from the
         first consensus."""
         H, W = self.H, self.W
+        self.init_info = {"kind": "mask" if isinstance(init, np.ndarray) else "ellipse"}
+        if not isinstance(init, (np.ndarray, tuple)):
+            t0 = time.perf_counter()
+            self._first_consensus()
+            init, init_frame = self.initialiser.find(init, self.hierarchy.consensus_mean,
+                                                     self.hierarchy.precision)
+            self.init_info = dict(self.initialiser.info, seconds=time.perf_counter() - t0)
         if isinstance(init, np.ndarray):
             region = lambda shift: _shift_columns(init, shift)
         else:
@@ -202,12 +215,16 @@ class Solver:
     def _foreground_shift(self, left_mask):
         """Half the foreground's left-view disparity: the median first consensus mean over
         the initial region (read as if the frames coincided)."""
-        self.messages.run(0.0, False, False)
-        self.hierarchy.downward()
+        self._first_consensus()
         mean = self.hierarchy.consensus_mean.to_numpy()
         prec = self.hierarchy.precision.to_numpy()
         sel = left_mask & (prec > 0)
         return float(np.median(mean[sel])) if sel.any() else 0.0
+
+    def _first_consensus(self):
+        """The consensus with no prior and no validity (Eqs. 4-6 brought down to pixels)."""
+        self.messages.run(0.0, False, False)
+        self.hierarchy.downward()
 
     # ------------------------------------------------------------------ small kernels
     @ti.func
@@ -272,6 +289,9 @@ class Solver:
         hier.downward()
         t = self._stage("downward", t)
         self.shapes.fit(self, hier.consensus_mean)
+        if first and p.exclusive_fit:
+            # the first fits had no shapes to exclude rows by: fit again with both
+            self.shapes.fit(self, hier.consensus_mean)
         t = self._stage("shapes", t)
         self.occ.compute(self.shapes, ls.phi_x, 1)
         t = self._stage("occlusion", t)
@@ -429,8 +449,9 @@ def solve(left, right, d_max, init, params=None, arch=None, callback=None, init_
         Rectified pair; the left image is the reference (``x_right = x_left - d``).
     d_max : float
         Largest disparity to search, left-view pixels.
-    init : tuple ``(cx, cy, rx, ry)`` or boolean array ``(H, W)``
-        Initial foreground (an ellipse in pixel coordinates, or a mask).
+    init : tuple ``(cx, cy, rx, ry)``, boolean array ``(H, W)``, ``"auto"``, Point or Box
+        Initial foreground (an ellipse in pixel coordinates, a mask, or found automatically:
+        anywhere, under a left-view point, or inside a left-view box).
     params : Params, optional
     arch : str, optional
         Taichi arch (``"cpu"``, ``"cuda"``, ``"vulkan"``, ...).

@@ -5,7 +5,11 @@ import numbers
 
 import numpy as np
 
+from .model.init import AUTO, Box, Point
+
 __all__ = ["check_inputs", "check_init", "parse_init"]
+
+KINDS = "expected an ellipse (cx, cy, rx, ry), a boolean mask, 'auto', a Point or a Box"
 
 
 def _largest_patch(params):
@@ -66,9 +70,25 @@ def check_init(init, shape):
         One line naming ``init``, what was expected and what was given.
     """
     H, W = shape
+    if isinstance(init, str) and init == AUTO:
+        return init
+    if isinstance(init, Point):
+        if not (math.isfinite(init.x) and math.isfinite(init.y)
+                and 0 <= init.x <= W - 1 and 0 <= init.y <= H - 1):
+            raise ValueError(f"init: expected a point inside the {W}x{H} image "
+                             f"(0 <= x <= {W - 1}, 0 <= y <= {H - 1}), got ({init.x:g}, {init.y:g})")
+        return Point(float(init.x), float(init.y))
+    if isinstance(init, Box):
+        x0, y0, x1, y1 = init.x0, init.y0, init.x1, init.y1
+        if not all(math.isfinite(v) for v in (x0, y0, x1, y1)) or x1 <= x0 or y1 <= y0:
+            raise ValueError(f"init: expected a box with x0 < x1 and y0 < y1 (positive area), "
+                             f"got ({x0:g}, {y0:g}, {x1:g}, {y1:g})")
+        if x0 < 0 or y0 < 0 or x1 > W or y1 > H:
+            raise ValueError(f"init: expected a box inside the {W}x{H} image, got "
+                             f"({x0:g}, {y0:g}, {x1:g}, {y1:g})")
+        return Box(float(x0), float(y0), float(x1), float(y1))
     if isinstance(init, (str, bytes)):
-        raise ValueError(f"init: expected an ellipse (cx, cy, rx, ry) or a boolean mask, "
-                         f"got the string {_describe(init)}")
+        raise ValueError(f"init: {KINDS}, got the string {_describe(init)}")
     if not isinstance(init, np.ndarray):
         try:
             as_array = np.asarray(init)
@@ -95,8 +115,7 @@ def check_init(init, shape):
     try:
         values = tuple(float(v) for v in init)
     except (TypeError, ValueError):
-        raise ValueError(f"init: expected an ellipse (cx, cy, rx, ry) or a boolean mask, "
-                         f"got {_describe(init)}") from None
+        raise ValueError(f"init: {KINDS}, got {_describe(init)}") from None
     if len(values) != 4:
         raise ValueError(f"init: expected an ellipse of 4 numbers (cx, cy, rx, ry), "
                          f"got {len(values)}")
@@ -117,26 +136,37 @@ def check_init(init, shape):
     return values
 
 
+def _numbers(text, rest, count, form):
+    try:
+        values = tuple(float(p) for p in rest.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != count:
+        raise ValueError(f"--init: expected {form} with {count} numbers, got {text!r}")
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"--init: expected {count} finite numbers, got {text!r}")
+    return values
+
+
 def parse_init(text):
-    """Parse the CLI's ``--init``: ``ellipse:CX,CY,RX,RY`` or ``mask:PATH`` (or a PNG path)."""
+    """Parse the CLI's ``--init``: ``auto``, ``point:X,Y``, ``box:X0,Y0,X1,Y1``,
+    ``ellipse:CX,CY,RX,RY`` or ``mask:PATH`` (or a PNG path); left-view pixels."""
     if not isinstance(text, str) or not text:
-        raise ValueError(f"--init: expected ellipse:CX,CY,RX,RY or mask:PATH, got {text!r}")
+        raise ValueError(f"--init: expected auto, point:X,Y, box:X0,Y0,X1,Y1, "
+                         f"ellipse:CX,CY,RX,RY or mask:PATH, got {text!r}")
     kind, _, rest = text.partition(":")
+    if text == AUTO:
+        return AUTO
+    if kind == "point":
+        return Point(*_numbers(text, rest, 2, "point:X,Y"))
+    if kind == "box":
+        return Box(*_numbers(text, rest, 4, "box:X0,Y0,X1,Y1"))
     if kind == "ellipse":
-        parts = rest.split(",")
-        try:
-            values = tuple(float(p) for p in parts)
-        except ValueError:
-            values = ()
-        if len(values) != 4:
-            raise ValueError(f"--init: expected ellipse:CX,CY,RX,RY with 4 numbers, got {text!r}")
-        if not all(math.isfinite(v) for v in values):
-            raise ValueError(f"--init: expected 4 finite numbers, got {text!r}")
-        return values
+        return _numbers(text, rest, 4, "ellipse:CX,CY,RX,RY")
     if kind == "mask" or text.lower().endswith(".png"):
         from .io import read_mask
         if kind == "mask" and not rest:
             raise ValueError(f"--init: expected mask:PATH with a path, got {text!r}")
         return read_mask(rest if kind == "mask" else text, name="--init")
-    raise ValueError(f"--init: unknown kind {kind!r}; expected ellipse:CX,CY,RX,RY or "
-                     f"mask:PATH")
+    raise ValueError(f"--init: unknown kind {kind!r}; expected auto, point:X,Y, "
+                     f"box:X0,Y0,X1,Y1, ellipse:CX,CY,RX,RY or mask:PATH")

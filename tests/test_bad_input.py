@@ -206,8 +206,8 @@ def test_init_ellipse_of_three_numbers():
 
 @pytest.mark.parametrize("init", [None, "32,24,10,8", object()])
 def test_init_of_the_wrong_kind(init):
-    with pytest.raises(ValueError, match=r"^init: expected an ellipse \(cx, cy, rx, ry\) or a "
-                                         r"boolean mask, got "):
+    with pytest.raises(ValueError, match=r"^init: expected an ellipse \(cx, cy, rx, ry\), a "
+                                         r"boolean mask, 'auto', a Point or a Box, got "):
         _check(init=init)
 
 
@@ -259,10 +259,11 @@ def test_init_frame_unknown():
     ("ellipse:a,b,c,d", r"^--init: expected ellipse:CX,CY,RX,RY with 4 numbers"),
     ("ellipse:1,2,3,4,", r"^--init: expected ellipse:CX,CY,RX,RY with 4 numbers"),
     ("ellipse:nan,2,3,4", r"^--init: expected 4 finite numbers, got 'ellipse:nan,2,3,4'$"),
-    ("circle:1,2,3", r"^--init: unknown kind 'circle'; expected ellipse:CX,CY,RX,RY or "
-                     r"mask:PATH$"),
+    ("circle:1,2,3", r"^--init: unknown kind 'circle'; expected auto, point:X,Y, "
+                     r"box:X0,Y0,X1,Y1, ellipse:CX,CY,RX,RY or mask:PATH$"),
     ("32,24,10,8", r"^--init: unknown kind '32,24,10,8'"),
-    ("", r"^--init: expected ellipse:CX,CY,RX,RY or mask:PATH, got ''$"),
+    ("", r"^--init: expected auto, point:X,Y, box:X0,Y0,X1,Y1, ellipse:CX,CY,RX,RY or "
+         r"mask:PATH, got ''$"),
     ("mask:", r"^--init: expected mask:PATH with a path, got 'mask:'$"),
 ])
 def test_parse_init_malformed(text, message):
@@ -366,13 +367,14 @@ def _cli(capsys, tmp_path, args, ti_arch):
     ("dmax_wide", r"^d_max: expected 0 < d_max < image width \(64\), got 64"),
     ("dmax_nan", r"^d_max: expected a finite number of pixels, got nan$"),
     ("init_malformed", r"^--init: expected ellipse:CX,CY,RX,RY with 4 numbers"),
-    ("init_unknown", r"^--init: unknown kind 'box'"),
+    ("init_unknown", r"^--init: unknown kind 'disc'"),
     ("init_outside", r"^init: the ellipse centred at \(500, 24\) .* lies outside"),
     ("init_radius", r"^init: expected positive radii, got rx=0, ry=8$"),
     ("init_mask_shape", r"^init: expected a mask of shape \(48, 64\), got shape \(20, 30\)$"),
     ("init_mask_empty", r"^init: the mask is empty"),
     ("no_dmax", r"^--dmax: required with LEFT RIGHT$"),
-    ("no_init", r"^--init: required with LEFT RIGHT"),
+    ("init_box_empty", r"^init: expected a box with x0 < x1 and y0 < y1 \(positive area\)"),
+    ("init_point_outside", r"^init: expected a point inside the 64x48 image"),
     ("one_image", r"^expected LEFT RIGHT \(two images\) or --scene DIR, got 1 image"),
     ("unknown_arch", r"^arch: expected one of cpu, .*, got 'tpu'$"),
     ("param_dt", r"^params\.dt: expected a number in \(0, 10\], got -1\.0$"),
@@ -400,7 +402,7 @@ def test_cli_bad_input(case, message, capsys, tmp_path, pair_files, ti_arch):
         "dmax_wide": [left, right, "--dmax", "64", "--init", "ellipse:32,24,10,8"],
         "dmax_nan": [left, right, "--dmax", "nan", "--init", "ellipse:32,24,10,8"],
         "init_malformed": [left, right, "--dmax", "12", "--init", "ellipse:32,24"],
-        "init_unknown": [left, right, "--dmax", "12", "--init", "box:1,2,3,4"],
+        "init_unknown": [left, right, "--dmax", "12", "--init", "disc:1,2,3,4"],
         "init_outside": [left, right, "--dmax", "12", "--init", "ellipse:500,24,10,8"],
         "init_radius": [left, right, "--dmax", "12", "--init", "ellipse:32,24,0,8"],
         "init_mask_shape": [left, right, "--dmax", "12", "--init",
@@ -408,7 +410,8 @@ def test_cli_bad_input(case, message, capsys, tmp_path, pair_files, ti_arch):
         "init_mask_empty": [left, right, "--dmax", "12", "--init",
                             f"mask:{folder / 'mask.png'}"],
         "no_dmax": [left, right, "--init", "ellipse:32,24,10,8"],
-        "no_init": [left, right, "--dmax", "12"],
+        "init_box_empty": [left, right, "--dmax", "12", "--init", "box:10,10,10,30"],
+        "init_point_outside": [left, right, "--dmax", "12", "--init", "point:64.5,3"],
         "one_image": [left, *good],
         "unknown_arch": [left, right, *good, "--arch", "tpu"],
         "param_dt": [left, right, *good, "--param", "dt=-1"],

@@ -31,7 +31,8 @@ def test_parse_init_ellipse_and_mask(tmp_path):
     ("ellipse:a,b,c,d", "4 numbers"),
     ("ellipse:1,2,0,3", "radii"),
     ("circle:1,2,3", "ellipse:CX,CY,RX,RY"),
-    (None, "required"),
+    ("box:1,2,1,5", "positive area"),
+    ("point:100,2", "point inside"),
 ])
 def test_parse_init_errors(spec, match):
     with pytest.raises(ValueError, match=match):

@@ -5,6 +5,7 @@ import taichi as ti
 
 from lss_kernels.reference import kernels as ref
 from lss_kernels.kernels.backend import FieldPool
+from lss_kernels.model.matching import MatchingCost
 from lss_kernels.model.messages import Messages
 from lss_kernels.params import Params
 
@@ -35,11 +36,12 @@ def hierarchy(pair):
     from lss_kernels.model.hierarchy import PatchHierarchy
     pool = FieldPool()
     h = PatchHierarchy(pool, H, W, C, SIZES)
+    matcher = MatchingCost(pool, H, W)
     lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
     pool.finalize()
     lf.from_numpy(pair[0])
     rf.from_numpy(pair[1])
-    h.build_costs(lf, rf)
+    h.build_costs(matcher, lf, rf)
     h.messages = Messages(h)        # one message pass (one compiled kernel) per hierarchy
     yield h
     pool.destroy()
@@ -64,6 +66,29 @@ def test_patch_costs_match_box_means(pair, hierarchy):
         np.testing.assert_allclose(got, want[level], atol=2e-5)
         assert got.min() == pytest.approx(0.0, abs=1e-6)
         assert got.max() == pytest.approx(1.0, abs=1e-6)
+
+
+def test_ad_census_patch_costs_match_the_specification(pair, ti_arch):
+    from lss_kernels.model.hierarchy import PatchHierarchy
+    pool = FieldPool()
+    h = PatchHierarchy(pool, H, W, C, SIZES)
+    matcher = MatchingCost(pool, H, W, "ad_census")
+    lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
+    pool.finalize()
+    # grey levels on a coarse grid: no near-ties between float32 and float64 comparisons
+    left, right = (np.round(p * 16) / 16 for p in pair)
+    lf.from_numpy(left.astype(np.float32))
+    rf.from_numpy(right.astype(np.float32))
+    matcher.setup(lf, rf)
+    h.build_costs(matcher, lf, rf)
+    want = ref.patch_costs(left.astype(np.float64), right.astype(np.float64), C, SIZES,
+                           kind="ad_census")
+    plain = ref.patch_costs(left.astype(np.float64), right.astype(np.float64), C, SIZES)
+    for level in range(len(SIZES)):
+        got = _inside(h, h.levels[level].cost, level)
+        np.testing.assert_allclose(got, want[level], atol=1e-4)
+        assert np.abs(got - plain[level]).max() > 0.05     # not the AD cost
+    pool.destroy()
 
 
 def _smooth_phi(rng, shift=0.0):
@@ -122,6 +147,7 @@ def test_hierarchy_in_one_pixel_blocks_matches_eight(pair, monkeypatch):
         monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
         pool = FieldPool()
         h = PatchHierarchy(pool, H, W, C, SIZES)
+        matcher = MatchingCost(pool, H, W)
         lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
         fD, fphi, fplus = (pool.field(ti.f32, (H, W)) for _ in range(3))
         pool.finalize()
@@ -130,7 +156,7 @@ def test_hierarchy_in_one_pixel_blocks_matches_eight(pair, monkeypatch):
         rf.from_numpy(pair[1])
         for f, a in zip((fD, fphi, fplus), (D, phi, phi_plus)):
             f.from_numpy(a.astype(np.float32))
-        h.build_costs(lf, rf)
+        h.build_costs(matcher, lf, rf)
         out = {}
         messages = Messages(h)
         for it in range(2):             # the second pass reuses the cached candidates
@@ -271,6 +297,7 @@ def test_cached_candidates_are_dropped_when_the_costs_change(pair):
     from lss_kernels.model.hierarchy import PatchHierarchy
     pool = FieldPool()
     h = PatchHierarchy(pool, H, W, C, SIZES)
+    matcher = MatchingCost(pool, H, W)
     lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
     pool.finalize()
     D = np.full((H, W), 2.5)
@@ -283,7 +310,7 @@ def test_cached_candidates_are_dropped_when_the_costs_change(pair):
         left = pair[0] if trial == 0 else rng.random((H, W, 3)).astype(np.float32)
         lf.from_numpy(left)
         rf.from_numpy(pair[1])
-        h.build_costs(lf, rf)
+        h.build_costs(matcher, lf, rf)
         h.upward(fD, fphi, fplus)
         messages.run(beta, True, True, keep=True)
         for level, s in enumerate(SIZES):
@@ -301,11 +328,12 @@ def test_integer_messages_without_subpixel_refinement(pair):
     from lss_kernels.model.hierarchy import PatchHierarchy
     pool = FieldPool()
     h = PatchHierarchy(pool, H, W, C, SIZES)
+    matcher = MatchingCost(pool, H, W)
     lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
     pool.finalize()
     lf.from_numpy(pair[0])
     rf.from_numpy(pair[1])
-    h.build_costs(lf, rf)
+    h.build_costs(matcher, lf, rf)
     Messages(h, subpixel=False).run(0.0, False, False, keep=True)
     for level in range(len(SIZES)):
         cost = _inside(h, h.levels[level].cost, level)

@@ -36,13 +36,15 @@ def _add_solve(subparsers):
                     "Writes disparity.pfm, occlusion.png, foreground.png, disparity.png, "
                     "overlay.png and summary.json into --out.")
     p.add_argument("images", nargs="*", metavar="LEFT RIGHT", help="left and right images")
-    p.add_argument("--scene", metavar="DIR", help="scene folder (reads d_max and init_ellipse "
-                   "from meta.json)")
+    p.add_argument("--scene", metavar="DIR", help="scene folder (reads d_max and, when given, "
+                   "init_ellipse from meta.json)")
     p.add_argument("--preset", metavar="NAME", help="a built-in rendered scene with ground "
                    "truth (easy, slanted, tiny) instead of files")
     p.add_argument("--dmax", type=float, metavar="N", help="largest disparity, left-view px")
-    p.add_argument("--init", metavar="SPEC", help="ellipse:CX,CY,RX,RY (left-view pixels) or "
-                   "mask:PATH (8-bit PNG, 255 = foreground)")
+    p.add_argument("--init", metavar="SPEC", help="initial foreground, left-view pixels: auto "
+                   "(found from the first consensus; the default without an ellipse), "
+                   "point:X,Y (the object under this pixel), box:X0,Y0,X1,Y1 (the object in "
+                   "this box), ellipse:CX,CY,RX,RY or mask:PATH (8-bit PNG, 255 = foreground)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--arch", default=DEFAULT_ARCH, metavar="ARCH",
                    help=f"Taichi backend: {', '.join(ARCHES)} (default {DEFAULT_ARCH}: CUDA if a "
@@ -68,8 +70,14 @@ def _params(args):
         try:
             if isinstance(current, tuple):
                 changes[name] = tuple(int(v) for v in value.split(","))
-            elif isinstance(current, int) and not isinstance(current, bool):
+            elif isinstance(current, bool):
+                if value.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(value)
+                changes[name] = value.lower() in ("true", "1")
+            elif isinstance(current, int):
                 changes[name] = int(value)
+            elif isinstance(current, str):
+                changes[name] = value
             else:
                 changes[name] = float(value)
         except ValueError:
@@ -83,6 +91,7 @@ def _params(args):
 def _inputs(args):
     """(left, right, d_max, init, init_frame, scene) from the solve/demo arguments."""
     from ..validate import parse_init
+    from .jobs import scene_init
     if sum(map(bool, (args.scene, args.images, args.preset))) > 1:
         raise CliError("give one of --scene DIR, --preset NAME or LEFT RIGHT")
     if args.scene or args.preset:
@@ -90,20 +99,15 @@ def _inputs(args):
         from ..scenes import make_scene
         scene = load_scene(args.scene) if args.scene else make_scene(args.preset)
         d_max = args.dmax if args.dmax is not None else scene.d_max
-        if args.init:
-            return scene.left, scene.right, d_max, parse_init(args.init), "left", scene
-        if scene.init_ellipse_cyclopean is not None:
-            return (scene.left, scene.right, d_max, scene.init_ellipse_cyclopean, "cyclopean",
-                    scene)
-        return scene.left, scene.right, d_max, scene.init_ellipse, "left", scene
+        init, frame = scene_init(scene, parse_init(args.init) if args.init else None)
+        return scene.left, scene.right, d_max, init, frame, scene
     if len(args.images) != 2:
         raise CliError(f"expected LEFT RIGHT (two images) or --scene DIR, got "
                        f"{len(args.images)} image argument(s)")
     if args.dmax is None:
         raise CliError("--dmax: required with LEFT RIGHT")
-    if args.init is None:
-        raise CliError("--init: required with LEFT RIGHT (ellipse:CX,CY,RX,RY or mask:PATH)")
-    return args.images[0], args.images[1], args.dmax, parse_init(args.init), "left", None
+    init = parse_init(args.init) if args.init else "auto"
+    return args.images[0], args.images[1], args.dmax, init, "left", None
 
 
 class Progress:

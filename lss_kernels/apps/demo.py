@@ -15,7 +15,7 @@ and the final ``disparity.png`` and ``overlay.png`` (left view, the input's size
 
 Command line (registered by :func:`add_cli`)::
 
-    lss demo [--scene DIR | LEFT RIGHT --dmax N --init ellipse:CX,CY,RX,RY|MASK.png]
+    lss demo [--scene DIR | LEFT RIGHT --dmax N] [--init auto|point:X,Y|box:X0,Y0,X1,Y1|ellipse:CX,CY,RX,RY|MASK.png]
              [--preset NAME] [--out DIR] [--every K] [--arch ARCH] [--patch X,Y,LEVEL]
              [--iterations N] [--quiet]
 """
@@ -41,13 +41,12 @@ DEFAULT_PRESET = "easy"
 # ---------------------------------------------------------------------------------------------
 
 def parse_init(text: str, shape=None):
-    """Parse ``--init`` (``ellipse:CX,CY,RX,RY`` or a mask PNG) with
-    :func:`lss_kernels.validate.parse_init` and, given the image ``shape``, check it against
-    the image with :func:`lss_kernels.validate.check_init`."""
+    """Parse ``--init`` (``auto``, ``point:X,Y``, ``box:X0,Y0,X1,Y1``, ``ellipse:CX,CY,RX,RY``
+    or a mask PNG; none = ``auto``) with :func:`lss_kernels.validate.parse_init` and, given
+    the image ``shape``, check it against the image with
+    :func:`lss_kernels.validate.check_init`."""
     from ..validate import check_init, parse_init as parse
-    if text is None:
-        raise ValueError("--init: required with LEFT RIGHT (ellipse:CX,CY,RX,RY or a mask PNG)")
-    init = parse(text)
+    init = "auto" if text is None else parse(text)
     return check_init(init, shape) if shape is not None else init
 
 
@@ -249,13 +248,15 @@ def add_cli(subparsers):
         description="Run the solver on a built-in scene, a scene folder or a stereo pair and "
                     "record its evolution in the layout of the paper's Fig. 1.")
     p.add_argument("images", nargs="*", metavar="LEFT RIGHT",
-                   help="left and right image files (with --dmax and --init)")
+                   help="left and right image files (with --dmax)")
     p.add_argument("--scene", metavar="DIR", help="a scene folder (lss_kernels.io.load_scene)")
     p.add_argument("--preset", default=DEFAULT_PRESET, metavar="NAME",
                    help=f"built-in scene used without data arguments (default {DEFAULT_PRESET})")
     p.add_argument("--dmax", type=float, metavar="N", help="largest disparity (left-view px)")
     p.add_argument("--init", metavar="SPEC",
-                   help="initial boundary: ellipse:CX,CY,RX,RY (left view) or a mask PNG")
+                   help="initial boundary (left view): auto, point:X,Y, box:X0,Y0,X1,Y1, "
+                        "ellipse:CX,CY,RX,RY or a mask PNG (default: the scene's ellipse, "
+                        "else auto)")
     p.add_argument("--out", default="lss_demo", metavar="DIR", help="output folder")
     p.add_argument("--every", type=int, default=10, metavar="K",
                    help="record a frame every K iterations (default 10)")
@@ -313,12 +314,9 @@ def main_demo(args) -> int:
                 scene = scenes.make_scene(args.preset)
             left, right = scene.left, scene.right
             d_max = float(args.dmax) if args.dmax is not None else float(scene.d_max)
-            if args.init is not None:
-                init = parse_init(args.init, left.shape[:2])
-            elif getattr(scene, "init_ellipse_cyclopean", None) is not None:
-                init, init_frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
-            else:
-                init = tuple(scene.init_ellipse)
+            from .jobs import scene_init
+            init, init_frame = scene_init(
+                scene, parse_init(args.init, left.shape[:2]) if args.init else None)
     except (ValueError, KeyError, FileNotFoundError) as exc:
         return _fail(str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc))
 

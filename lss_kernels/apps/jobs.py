@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Job", "SolverCache", "job_from_scene", "run_job", "write_outputs"]
+__all__ = ["Job", "SolverCache", "job_from_scene", "run_job", "scene_init", "write_outputs"]
 
 
 @dataclass
@@ -59,6 +59,18 @@ class Job:
     scene: Any = None
 
 
+def scene_init(scene, init=None):
+    """``(init, frame)`` of a scene: ``init`` when given (left view), else the folder's
+    ellipse (cyclopean when it gives one), else ``"auto"``."""
+    if init is not None:
+        return init, "left"
+    if scene.init_ellipse_cyclopean is not None:
+        return tuple(scene.init_ellipse_cyclopean), "cyclopean"
+    if scene.init_ellipse is not None:
+        return tuple(scene.init_ellipse), "left"
+    return "auto", "left"
+
+
 def job_from_scene(scene, d_max=None, init=None):
     """The :class:`Job` of a scene (:class:`lss_kernels.io.Scene`, or a folder): its own
     initial ellipse (cyclopean when the folder gives one) unless ``init`` is given."""
@@ -66,12 +78,7 @@ def job_from_scene(scene, d_max=None, init=None):
     if not isinstance(scene, io.Scene):
         scene = io.load_scene(scene)
     d_max = float(scene.d_max if d_max is None else d_max)
-    if init is not None:
-        init, frame = init, "left"
-    elif scene.init_ellipse_cyclopean is not None:
-        init, frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
-    else:
-        init, frame = tuple(scene.init_ellipse), "left"
+    init, frame = scene_init(scene, init)
     has_truth = scene.disp_left is not None and scene.occ_left is not None
     return Job(scene.name, scene.left, scene.right, d_max, init, frame,
                scene if has_truth else None)
@@ -122,23 +129,36 @@ def run_job(job, out_dir, params, cache=None, callback=None, extra=None):
     start = time.perf_counter()
     try:
         result, solver = cache.solve(job, params, callback)
-        left = solver.left_image
+        left, initial = solver.left_image, solver.initial_foreground_left()
     finally:
         if own:
             cache.close()
     info = {"name": job.name, "wall_seconds": round(time.perf_counter() - start, 3),
-            "d_max": float(job.d_max), "arch": backend.current_arch()}
+            "d_max": float(job.d_max), "arch": backend.current_arch(),
+            "init": _jsonable(solver.init_info)}
     if job.scene is not None:
         from ..metrics import score
         info["score"] = {k: (float(v) if hasattr(v, "__float__") else v)
                          for k, v in score(result.disparity, result.occlusion, job.scene).items()}
     info.update(extra or {})
-    return write_outputs(out_dir, result, left, params, info)
+    return write_outputs(out_dir, result, left, params, info, initial)
 
 
-def write_outputs(out_dir, result, left, params, extra=None):
+def _jsonable(value):
+    """Numbers, lists and dicts of ``value`` as plain Python (numpy scalars included)."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def write_outputs(out_dir, result, left, params, extra=None, initial=None):
     """Write the result files into ``out_dir`` atomically (a temporary sibling folder, then
-    renamed into place); returns the summary."""
+    renamed into place); returns the summary.  ``initial``: the initial foreground (left
+    view), drawn on ``overlay.png``."""
     from .. import io, viz
     out_dir = os.fspath(out_dir)
     parent = os.path.dirname(os.path.abspath(out_dir)) or "."
@@ -151,7 +171,7 @@ def write_outputs(out_dir, result, left, params, extra=None):
         viz.save_disparity_png(os.path.join(tmp, "disparity.png"), result.disparity,
                                vmin=0.0, occlusion=result.occlusion)
         viz.save_overlay_png(os.path.join(tmp, "overlay.png"), left, result.foreground,
-                             result.occlusion)
+                             result.occlusion, initial)
         summary = dict(iterations=result.iterations, stop_reason=result.stop_reason,
                        seconds=round(result.timings.get("total", 0.0), 3),
                        timings={k: round(v, 4) for k, v in result.timings.items()},

@@ -212,8 +212,8 @@ class PatchHierarchy:
         return rows * cols
 
     @ti.kernel
-    def _cost_from_pixels(self, left: ti.template(), right: ti.template(), dst: ti.template(),
-                          offs: ti.template()):
+    def _cost_from_pixels(self, matcher: ti.template(), left: ti.template(),
+                          right: ti.template(), dst: ti.template(), offs: ti.template()):
         H, W = self.H, self.W
         for y, x, k in dst:
             c = k + 1
@@ -225,10 +225,7 @@ class PatchHierarchy:
                 if 0 <= py < H and 0 <= px < W:
                     xl = ti.min(px + c, W - 1)
                     xr = ti.max(px - c, 0)
-                    diff = 0.0
-                    for ch in ti.static(range(3)):
-                        diff += ti.abs(left[py, xl][ch] - right[py, xr][ch])
-                    total += diff / 3.0
+                    total += matcher.cost(left, right, py, xl, xr)
                     n += 1
             dst[y, x, k] = total / ti.max(n, 1)
 
@@ -265,15 +262,16 @@ class PatchHierarchy:
         for y, x, k in vol:
             vol[y, x, k] = (vol[y, x, k] - lo) * scale
 
-    def build_costs(self, left, right):
+    def build_costs(self, matcher, left, right):
         """Fill every level's C_p(c) (patch mean of M, min-max normalised per level).
 
-        ``left``, ``right``: ``ti.Vector.field(3, f32)`` of shape ``(H, W)``, values in [0, 1].
-        Level 1 sums the pixels' matching costs M(x, y, c) = mean_RGB |L(x + c) - R(x - c)|
+        ``left``, ``right``: ``ti.Vector.field(3, f32)`` of shape ``(H, W)``, values in [0, 1];
+        ``matcher``: a :class:`lss_kernels.model.matching.MatchingCost` whose ``setup`` ran.
+        Level 1 sums the pixels' matching costs M(x, y, c) of L(x + c) against R(x - c)
         (image coordinates clamped at the borders); each higher level sums its children.
         """
         first = self.levels[0]
-        self._cost_from_pixels(left, right, first.cost, first.offsets)
+        self._cost_from_pixels(matcher, left, right, first.cost, first.offsets)
         for child, level in zip(self.levels, self.levels[1:]):
             self._cost_from_children(child.cost, child.size, level.cost, level.offsets)
         for level in self.levels:

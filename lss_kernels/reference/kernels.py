@@ -16,26 +16,46 @@ from ..kernels.filters import gaussian_taps
 from ..model import FIXED_POINT_STEPS
 
 __all__ = [
-    "matching_cost", "box_sum", "box_mean", "box_extreme", "patches_containing", "patch_costs",
+    "census", "matching_cost", "box_sum", "box_mean", "box_extreme", "patches_containing", "patch_costs",
     "huber_weight",
     "patch_messages", "consensus", "median_filter", "convolve", "gaussian_derivatives",
     "curvature", "interp_row", "interp_volume", "shape_value", "basis", "fit_shape",
     "delta_theta", "boundary_weight", "levelset_step", "squared_distance", "reinitialise",
-    "disparity",
+    "disparity", "near_pixels", "grow_region",
 ]
 
 
 # ---------------------------------------------------------------------------- costs (Sec. 4)
-def matching_cost(left, right, c_max):
-    """M[y, x, k] = mean over RGB of |L(y, x + c) - R(y, x - c)|, ``c = k + 1``, with image
-    coordinates clamped to the border.  ``left``, ``right``: ``(H, W, 3)`` in [0, 1]."""
+def census(image, radius=3):
+    """Census transform: per pixel, the bits ``grey(neighbour) < grey(centre)`` over the
+    ``(2 radius + 1)^2 - 1`` neighbours (clamped at the borders), as a boolean array."""
+    grey = image @ np.array([0.299, 0.587, 0.114])
+    H, W = grey.shape
+    y, x = np.mgrid[0:H, 0:W]
+    bits = [grey[np.clip(y + dy, 0, H - 1), np.clip(x + dx, 0, W - 1)] < grey
+            for dy in range(-radius, radius + 1) for dx in range(-radius, radius + 1)
+            if dy or dx]
+    return np.stack(bits, axis=-1)
+
+
+def matching_cost(left, right, c_max, kind="ad"):
+    """M[y, x, k] for ``c = k + 1``: the left pixel ``(y, x + c)`` against the right pixel
+    ``(y, x - c)`` (clamped to the border); ``left``, ``right``: ``(H, W, 3)`` in [0, 1].
+    ``"ad"``: mean over RGB of the absolute difference; ``"ad_census"``:
+    ``rho(AD, 10/255) + rho(Hamming of the 7x7 census / 48, 30/63)``,
+    ``rho(v, l) = 1 - exp(-v / l)``."""
     H, W, _ = left.shape
     x = np.arange(W)
     M = np.empty((H, W, c_max), np.float64)
+    if kind == "ad_census":
+        cl, cr = census(left), census(right)
     for k in range(c_max):
         c = k + 1
-        M[:, :, k] = np.abs(left[:, np.minimum(x + c, W - 1)]
-                            - right[:, np.maximum(x - c, 0)]).mean(axis=2)
+        xl, xr = np.minimum(x + c, W - 1), np.maximum(x - c, 0)
+        M[:, :, k] = np.abs(left[:, xl] - right[:, xr]).mean(axis=2)
+        if kind == "ad_census":
+            hamming = (cl[:, xl] != cr[:, xr]).sum(axis=2) / 48.0
+            M[:, :, k] = (1 - np.exp(-M[:, :, k] / (10 / 255))) + (1 - np.exp(-hamming / (30 / 63)))
     return M
 
 
@@ -76,9 +96,9 @@ def patches_containing(a, size):
     return box_sum(a[::-1, ::-1], size)[::-1, ::-1]
 
 
-def patch_costs(left, right, c_max, sizes):
+def patch_costs(left, right, c_max, sizes, kind="ad"):
     """Per level: the patch-mean matching cost, min-max normalised to [0, 1]."""
-    M = matching_cost(left, right, c_max)
+    M = matching_cost(left, right, c_max, kind)
     out = []
     for s in sizes:
         v = box_mean(M, s)
@@ -333,3 +353,43 @@ def disparity(phi, theta1_map, theta2_map, c_max):
     """Eq. 3 with the sharp Heaviside: Theta_1 where phi > 0, else Theta_2, clamped to
     [0, c_max]."""
     return np.clip(np.where(phi > 0, theta1_map, theta2_map), 0.0, c_max)
+
+
+# ------------------------------------------------------------------ initialisation (init.py)
+def near_pixels(d, window, contrast):
+    """Pixels whose d-bar stands ``contrast`` above the ground of their row: the larger of the
+    minima of d-bar's 5x5 maxima over ``[x-window, x-1]`` and ``[x+1, x+window]`` (the one
+    that exists at the image's side); ``d < 0`` = no match."""
+    H, W = d.shape
+    padded = np.pad(d, 2, constant_values=-1.0)
+    hi = np.max([padded[2 + dy:2 + dy + H, 2 + dx:2 + dx + W]
+                 for dy in range(-2, 3) for dx in range(-2, 3)], axis=0)
+    near = np.zeros((H, W), bool)
+    for y in range(H):
+        for x in range(W):
+            left = hi[y, max(x - window, 0):x]
+            right = hi[y, x + 1:x + 1 + window]
+            lo = [v[v >= 0].min() for v in (left, right) if (v >= 0).any()]
+            if d[y, x] >= 0 and lo:
+                ground = max(lo) if len(lo) == 2 else lo[0]
+                near[y, x] = d[y, x] - ground > contrast
+    return near
+
+
+def grow_region(d, seed, seed_d, tolerance, step):
+    """The 4-connected region grown from ``seed = (y, x)`` over pixels with
+    ``|d - seed_d| <= tolerance`` and ``|d - d_neighbour| <= step`` (breadth first)."""
+    H, W = d.shape
+    d = d.copy()
+    d[seed] = seed_d
+    region = np.zeros((H, W), bool)
+    region[seed] = True
+    todo = [seed]
+    while todo:
+        y, x = todo.pop()
+        for v, u in ((y, x + 1), (y, x - 1), (y + 1, x), (y - 1, x)):
+            if (0 <= v < H and 0 <= u < W and not region[v, u] and d[v, u] >= 0
+                    and abs(d[v, u] - seed_d) <= tolerance and abs(d[v, u] - d[y, x]) <= step):
+                region[v, u] = True
+                todo.append((v, u))
+    return region

@@ -1,0 +1,100 @@
+"""The pixel matching cost M of Sec. 4: the data the patch hierarchy averages into C_p(c).
+
+M(x, y, c) compares the left image at x + c with the right image at x - c (the cyclopean
+frame; image coordinates clamped at the borders).  Two costs:
+
+``"ad"``
+    the paper's: absolute difference of colour, mean over RGB (images in [0, 1]);
+``"ad_census"``
+    AD-Census (Mei et al., "On building an accurate stereo matching system on graphics
+    hardware", 2011): rho(AD, lambda_ad) + rho(census, lambda_census) with
+    rho(v, lambda) = 1 - exp(-v / lambda), where census is the Hamming distance between the
+    7x7 census transforms (each neighbour's grey value below the centre's, 48 bits) of the
+    two pixels, as a fraction of the 48 bits.  The census term depends only on the order of
+    grey values around a pixel, so a dark or low-contrast texture, or a gain and offset
+    between the cameras, matches as sharply as a bright one; the AD term keeps colour
+    where the census is ambiguous (flat regions).
+
+Either way the hierarchy min-max normalises each level's patch means, so only the shape of
+M matters.
+"""
+import taichi as ti
+
+from ..kernels.backend import FieldPool
+
+__all__ = ["COSTS", "MatchingCost"]
+
+#: The matching costs the solver knows (``Params.matching_cost``).
+COSTS = ("ad", "ad_census")
+
+#: Census window radius (7x7 window: 48 neighbours, two 32-bit words).
+_RADIUS = 3
+#: rho's scales (Mei et al.'s 10 / 255 for AD; 30 of 63 bits, as a fraction, for census).
+_LAMBDA_AD = 10.0 / 255.0
+_LAMBDA_CENSUS = 30.0 / 63.0
+
+
+@ti.data_oriented
+class MatchingCost:
+    """Owns what the pixel cost needs besides the images (the census transforms of both
+    views, for ``"ad_census"``) and evaluates M at one pixel pair (:meth:`cost`).
+
+    Parameters
+    ----------
+    pool : FieldPool
+    height, width : int
+    kind : {"ad", "ad_census"}
+    """
+
+    def __init__(self, pool: FieldPool, height, width, kind="ad"):
+        if kind not in COSTS:
+            raise ValueError(f"matching_cost: expected one of {', '.join(COSTS)}, got {kind!r}")
+        self.H, self.W, self.kind = int(height), int(width), kind
+        self.census = kind == "ad_census"
+        if self.census:
+            shape = (self.H, self.W)
+            self.census_left = pool.vector(2, ti.u32, shape)
+            self.census_right = pool.vector(2, ti.u32, shape)
+
+    @ti.func
+    def _grey(self, img: ti.template(), y, x):
+        p = img[ti.min(ti.max(y, 0), self.H - 1), ti.min(ti.max(x, 0), self.W - 1)]
+        return 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
+
+    @ti.kernel
+    def _transform(self, img: ti.template(), out: ti.template()):
+        for y, x in out:
+            centre = self._grey(img, y, x)
+            words = ti.Vector([ti.u32(0), ti.u32(0)])
+            bit = 0
+            for dy, dx in ti.static(ti.ndrange((-_RADIUS, _RADIUS + 1),
+                                               (-_RADIUS, _RADIUS + 1))):
+                if ti.static(dy != 0 or dx != 0):
+                    if self._grey(img, y + dy, x + dx) < centre:
+                        words[bit // 32] |= ti.u32(1) << ti.u32(bit % 32)
+                    bit += 1
+            out[y, x] = words
+
+    def setup(self, left, right):
+        """The census transforms of both views (``left``, ``right``: ``(H, W)`` RGB vector
+        fields in [0, 1]); nothing for ``"ad"``."""
+        if self.census:
+            self._transform(left, self.census_left)
+            self._transform(right, self.census_right)
+
+    @ti.func
+    def cost(self, left: ti.template(), right: ti.template(), y, xl, xr):
+        """M for the left pixel (y, xl) against the right pixel (y, xr) (both in the
+        image)."""
+        diff = 0.0
+        for ch in ti.static(range(3)):
+            diff += ti.abs(left[y, xl][ch] - right[y, xr][ch])
+        value = diff / 3.0
+        if ti.static(self.census):
+            a = self.census_left[y, xl]
+            b = self.census_right[y, xr]
+            bits = ti.math.popcnt(a[0] ^ b[0]) + ti.math.popcnt(a[1] ^ b[1])
+            hamming = ti.cast(bits, ti.f32) / 48.0
+            value = (1.0 - ti.exp(-value / _LAMBDA_AD)) + \
+                (1.0 - ti.exp(-hamming / _LAMBDA_CENSUS))
+        return value

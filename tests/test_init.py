@@ -1,0 +1,174 @@
+"""Initialisation without a hand-drawn ellipse (lss_kernels.model.init): kernels against the
+numpy specification, each kind on rendered scenes with exact ground truth, and bad input."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from lss_kernels import Box, Point
+from lss_kernels.reference import kernels as ref
+from lss_kernels.validate import check_init, parse_init
+
+
+def _iou(a, b):
+    return (a & b).sum() / (a | b).sum()
+
+
+@pytest.fixture(scope="module")
+def region(ti_arch):
+    from lss_kernels.kernels.backend import FieldPool
+    from lss_kernels.model.init import InitialRegion
+    pool = FieldPool()
+    r = InitialRegion(pool, 24, 40)
+    pool.finalize()
+    return r
+
+
+def _quantised_depths(seed):
+    """A background of slowly varying depth, a near block, a few holes; values on a 0.25
+    grid so float32 and float64 compare exactly."""
+    rng = np.random.default_rng(seed)
+    d = np.round((3.0 + rng.normal(0, 0.3, (24, 40))) * 4) / 4
+    d[6:17, 12:27] += 4.0
+    d[rng.random((24, 40)) < 0.05] = -1.0
+    return d.astype(np.float32)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_near_pixels_match_the_specification(region, seed):
+    d = _quantised_depths(seed)
+    region.d.from_numpy(d)
+    region.mark_near(20, 1.5)              # wider than the block, as the rule needs
+    got = region.label.to_numpy() >= 0
+    want = ref.near_pixels(d, 20, 1.5)
+    inner = np.s_[8:15, 14:25]
+    assert want[inner][d[inner] >= 0].all()      # the block stands out, holes aside
+    np.testing.assert_array_equal(got, want)
+
+
+def test_propagation_gives_one_label_per_component(region):
+    d = np.full((24, 40), 1.0, np.float32)
+    d[2:6, 2:6] = d[10:20, 20:35] = 8.0
+    region.d.from_numpy(d)
+    region.mark_near(20, 1.5)
+    region.until_stable(region.propagate)
+    labels = region.label.to_numpy()
+    assert len(np.unique(labels[2:6, 2:6])) == 1 and len(np.unique(labels[10:20, 20:35])) == 1
+    assert labels[3, 3] != labels[12, 22]
+    assert (labels[d < 8] == -1).all()
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_region_growing_matches_the_specification(region, seed):
+    d = _quantised_depths(seed)
+    region.d.from_numpy(d)
+    region.seed(11, 19)
+    seed_d = float(d[11, 19]) if d[11, 19] >= 0 else 7.0
+    region.d[11, 19] = seed_d
+    region.until_stable(lambda: region.grow(seed_d, 2.0, 0.75))
+    got = region.label.to_numpy() == 1
+    want = ref.grow_region(d, (11, 19), seed_d, 2.0, 0.75)
+    assert want.sum() > 50
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.fixture(scope="module")
+def easy(ti_arch):
+    from lss_kernels.scenes import make_scene
+    from lss_kernels.solver import Solver
+    scene = make_scene("easy", seed=1)
+    solver = Solver(scene.left, scene.right, scene.d_max, tuple(scene.init_ellipse))
+    yield scene, solver
+    solver.close()
+
+
+def _inits(scene):
+    ys, xs = np.nonzero(scene.fg_left)
+    return {"auto": "auto", "point": Point(xs.mean(), ys.mean()),
+            "box": Box(xs.min(), ys.min(), xs.max() + 1, ys.max() + 1)}
+
+
+@pytest.mark.parametrize("kind", ["auto", "point", "box"])
+def test_each_kind_finds_the_rendered_object(easy, kind):
+    scene, solver = easy
+    solver.reset(scene.left, scene.right, scene.d_max, _inits(scene)[kind])
+    start = solver.initial_foreground_left()
+    assert _iou(start, scene.fg_left) >= 0.5
+    assert solver.init_info["kind"] == kind and solver.init_info["seconds"] > 0
+    result = solver.run()
+    assert _iou(result.foreground, scene.fg_left) >= 0.9
+
+
+def test_auto_on_a_slanted_scene(ti_arch):
+    from lss_kernels.scenes import make_scene
+    from lss_kernels.solver import Solver
+    scene = make_scene("slanted", seed=2)
+    solver = Solver(scene.left, scene.right, scene.d_max, "auto")
+    try:
+        assert _iou(solver.initial_foreground_left(), scene.fg_left) >= 0.5
+    finally:
+        solver.close()
+
+
+def test_parse_init_kinds():
+    assert parse_init("auto") == "auto"
+    assert parse_init("point:3,4.5") == Point(3.0, 4.5)
+    assert parse_init("box:1,2,30,40") == Box(1.0, 2.0, 30.0, 40.0)
+    assert parse_init("ellipse:1,2,3,4") == (1.0, 2.0, 3.0, 4.0)
+    for bad in ("point:1", "box:1,2,3", "point:a,b", "box:1,2,3,nan", "disc:1,2"):
+        with pytest.raises(ValueError, match="--init"):
+            parse_init(bad)
+
+
+@pytest.mark.parametrize("init, message", [
+    (Point(-1, 5), "point inside"), (Point(5, 100), "point inside"),
+    (Box(10, 10, 10, 20), "positive area"), (Box(10, 20, 30, 5), "positive area"),
+    (Box(-5, 0, 20, 20), "inside the"), (Box(0, 0, 80, 20), "inside the")])
+def test_bad_points_and_boxes_are_refused(init, message):
+    with pytest.raises(ValueError, match=message):
+        check_init(init, (48, 64))
+
+
+def _solve_cli(tmp_path, left, right, *args):
+    from lss_kernels import io
+    for name, image in (("l.png", left), ("r.png", right)):
+        io.write_png(tmp_path / name, np.round(np.clip(image, 0, 1) * 255).astype(np.uint8))
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "lss_kernels.apps.cli", "solve",
+                           str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--arch", "cpu",
+                           "--quiet", "--out", str(out), *args],
+                          capture_output=True, text=True, timeout=600)
+    return proc, out
+
+
+def test_cli_point_outside_the_image_exits_2_and_writes_nothing(tmp_path):
+    from lss_kernels.scenes import make_scene
+    scene = make_scene("tiny")
+    proc, out = _solve_cli(tmp_path, scene.left, scene.right, "--dmax", "16",
+                           "--init", "point:500,3")
+    assert proc.returncode == 2, proc.stderr
+    assert "point inside" in proc.stderr and "Traceback" not in proc.stderr
+    assert not out.exists()
+
+
+def test_cli_auto_on_a_single_plane_exits_2_and_writes_nothing(tmp_path):
+    rng = np.random.default_rng(0)
+    right = rng.random((48, 96, 3)).astype(np.float32)
+    left = np.roll(right, 6, axis=1)              # one fronto-parallel plane at d = 6
+    proc, out = _solve_cli(tmp_path, left, right, "--dmax", "16")
+    assert proc.returncode == 2, proc.stderr
+    assert "no foreground found" in proc.stderr and "Traceback" not in proc.stderr
+    assert not out.exists()
+
+
+def test_cli_without_init_uses_auto_and_reports_it(tmp_path):
+    from lss_kernels.scenes import make_scene
+    scene = make_scene("easy", seed=1)
+    proc, out = _solve_cli(tmp_path, scene.left, scene.right, "--dmax", str(scene.d_max),
+                           "--max-iterations", "30")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["init"]["kind"] == "auto" and summary["init"]["candidates"] >= 1
+    assert "rule" in summary["init"] and summary["init"]["seconds"] > 0
