@@ -4,6 +4,7 @@
 ``lss demo``    watch the cooperative dynamics (paper Fig. 1)
 ``lss eval``    Table 1 of the paper on a dataset, with classical peers
 ``lss bench``   stage-by-stage timings and scaling
+``lss batch``   many pairs or scene folders on a Dask cluster
 
 Errors on the command line are one line on stderr and exit status 2; nothing half-written is
 left in ``--out`` (results are written to a temporary folder that is moved into place).
@@ -22,7 +23,7 @@ from ..kernels.backend import ARCHES, DEFAULT_ARCH  # noqa: E402
 
 __all__ = ["main"]
 
-SUBCOMMAND_MODULES = ("demo", "evaluate", "bench")
+SUBCOMMAND_MODULES = ("demo", "evaluate", "bench", "batch")
 
 
 class CliError(Exception):

@@ -25,8 +25,6 @@ import json
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from multiprocessing import get_context
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -46,16 +44,25 @@ METHOD_NAMES = ("lss",) + tuple(BASELINES)
 
 
 # ---------------------------------------------------------------------------------------------
-# One run (executed in a worker process, or in the caller's when jobs == 1)
+# One run (executed on a Dask worker, or in the caller's process when jobs == 1)
 # ---------------------------------------------------------------------------------------------
 
-def _init_worker(arch: str, threads: int, methods) -> None:
-    """Per-process set-up: Taichi for the solver, OpenCV's thread count for the peers."""
+def _init_worker(arch: str, threads: int | None, methods) -> None:
+    """Per-process set-up: Taichi for the solver, OpenCV's thread count for the peers (a
+    no-op when done before with the same settings)."""
     if "lss" in methods:
         from ..kernels import backend
         backend.init(arch=arch, threads=threads)
     if any(m in BASELINES for m in methods):
-        require_opencv().setNumThreads(threads)
+        require_opencv().setNumThreads(threads or os.cpu_count() or 1)
+
+
+def _run_on_worker(task, methods, arch: str, threads_by_host: dict) -> dict:
+    """:func:`_run_one` on a Dask worker, set up for ``methods`` first (Taichi starts once
+    per worker process; its solver is kept for the next scene of the same size)."""
+    from .batch import threads_here
+    _init_worker(arch, threads_here(threads_by_host), methods)
+    return _run_one(*task)
 
 
 #: This process's last solver, reused (``Solver.reset``) for the next scene of the same size
@@ -184,7 +191,7 @@ def _check_methods(methods) -> tuple:
 def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs: int = 1,
              force: bool = False, arch: str = "cpu", params=None,
              progress: bool = True, trace: bool = False,
-             restart_taichi: bool = False) -> list:
+             restart_taichi: bool = False, scheduler: str | None = None) -> list:
     """Run ``methods`` on every scene of ``dataset_dir``, score them and write the report.
 
     Parameters
@@ -197,9 +204,10 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
     out : str or path-like
         Output folder (created).
     jobs : int
-        Worker processes ("spawn" context: Taichi is not fork-safe); each initialises Taichi
-        once with ``max(1, cpu_count // jobs)`` threads.  ``jobs=1`` runs in the calling
-        process, initialising Taichi there with ``arch`` unless it already runs on ``arch``.
+        Worker processes of a local Dask cluster (:func:`lss_kernels.apps.batch.dask_client`;
+        needs Dask); each initialises Taichi once with ``max(1, cpu_count // jobs)`` threads.
+        ``jobs=1`` runs in the calling process without Dask, initialising Taichi there with
+        ``arch`` unless it already runs on ``arch``.
     force : bool
         Recompute runs that already have a ``result.json``.
     arch : str
@@ -218,7 +226,9 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
         each new solver, so that it finds the kernels a fresh process compiled for its image
         size and search range, whatever ran before it.  Every Taichi field of the calling
         process becomes invalid: ``lss eval`` sets it, as it owns its process.  Worker
-        processes (``jobs > 1``) always do.
+        processes (``jobs > 1`` or ``scheduler``) always do.
+    scheduler : str or None
+        Address of a running Dask scheduler: run there instead (``jobs`` is then unused).
 
     Returns
     -------
@@ -235,11 +245,16 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
     FileNotFoundError
         ``dataset_dir`` is not a folder.
     ImportError
-        One line, when a requested peer needs OpenCV and it is missing.
+        One line, when a requested peer needs OpenCV and it is missing, or ``jobs > 1`` or
+        ``scheduler`` and Dask is missing.
     """
     methods = _check_methods(methods)
     if not isinstance(jobs, int) or jobs < 1:
         raise ValueError(f"jobs: expected an integer >= 1, got {jobs!r}")
+    remote = jobs > 1 or scheduler is not None
+    if remote:
+        from .batch import require_dask
+        require_dask(f"--jobs {jobs}" if scheduler is None else "--scheduler")
     scene_dirs = [Path(p) for p in io.list_scenes(dataset_dir)]
     out = Path(out)
     names = [p.name for p in scene_dirs]
@@ -254,14 +269,16 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
                                                    "skipped": True}
             else:
                 todo.append((os.fspath(scene_dir), method, os.fspath(run_dir), params,
-                             trace and method == "lss", restart_taichi or jobs > 1))
+                             trace and method == "lss", restart_taichi or remote))
 
     total = len(names) * len(methods)
     log = _Progress(total, enabled=progress)
     for record in records.values():
         log.done(record)
     fresh = {}
-    for record in _execute(todo, methods, jobs, arch):
+    run = (_execute_on_dask(todo, methods, jobs, arch, scheduler) if remote
+           else _execute(todo, methods, arch))
+    for record in run:
         record["skipped"] = False
         fresh[record["scene"], record["method"]] = record
         log.done(record)
@@ -287,30 +304,36 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
     return rows
 
 
-def _execute(todo, methods, jobs: int, arch: str):
-    """Yield the records of the runs in ``todo`` as they finish."""
+def _execute(todo, methods, arch: str):
+    """Yield the records of the runs in ``todo``, run one after the other in this process."""
     if not todo:
         return
-    if jobs == 1:
-        if "lss" in methods:
-            from ..kernels import backend
-            if backend.current_arch() != arch:
-                backend.init(arch=arch)
-        try:
-            for task in sorted(todo, key=_solver_key):
-                yield _run_one(*task)
-        finally:
-            _release_solver()
-        return
-    threads = max(1, (os.cpu_count() or 1) // jobs)
-    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn"),
-                               initializer=_init_worker, initargs=(arch, threads, methods))
+    if "lss" in methods:
+        from ..kernels import backend
+        if backend.current_arch() != arch:
+            backend.init(arch=arch)
     try:
-        futures = [pool.submit(_run_one, *task) for task in sorted(todo, key=_solver_key)]
+        for task in sorted(todo, key=_solver_key):
+            yield _run_one(*task)
+    finally:
+        _release_solver()
+
+
+def _execute_on_dask(todo, methods, jobs: int, arch: str, scheduler: str | None):
+    """Yield the records of the runs in ``todo`` as they finish on Dask: a local cluster of
+    ``jobs`` worker processes, or the cluster at ``scheduler``."""
+    if not todo:
+        return
+    from distributed import as_completed
+    from .batch import cluster_arch, dask_client, worker_threads
+    if "lss" in methods:
+        arch = cluster_arch(arch, scheduler)
+    with dask_client(jobs, scheduler, what=f"--jobs {jobs}") as client:
+        threads = worker_threads(client)
+        futures = [client.submit(_run_on_worker, task, methods, arch, threads, pure=False)
+                   for task in sorted(todo, key=_solver_key)]
         for future in as_completed(futures):
             yield future.result()
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
 
 
 class _Progress:
@@ -346,7 +369,10 @@ def add_cli(subparsers) -> None:
                    help=f"comma-separated, any of {', '.join(METHOD_NAMES)} "
                         "(default: %(default)s)")
     p.add_argument("--out", default="eval_out", help="output folder (default: %(default)s)")
-    p.add_argument("--jobs", type=int, default=1, help="worker processes (default: 1)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="worker processes of a local Dask cluster (default: 1, no Dask)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on the Dask cluster at this scheduler address instead")
     p.add_argument("--force", action="store_true", help="recompute finished runs")
     p.add_argument("--arch", default=DEFAULT_ARCH, metavar="ARCH",
                    help=f"Taichi backend for lss: {', '.join(ARCHES)} (default {DEFAULT_ARCH}: "
@@ -365,7 +391,7 @@ def main_eval(args) -> int:
     try:
         rows = run_eval(args.dataset_dir, methods=methods, out=args.out, jobs=args.jobs,
                         force=args.force, arch=args.arch, progress=not args.quiet,
-                        trace=args.trace, restart_taichi=True)
+                        trace=args.trace, restart_taichi=True, scheduler=args.scheduler)
     except (ValueError, FileNotFoundError, ImportError) as error:
         print(f"lss eval: error: {error}", file=sys.stderr)
         return 2
