@@ -1,8 +1,8 @@
 """Two-layer synthetic stereo scenes with exact ground truth.
 
-A textured foreground surface with an elliptic outline floats in front of a textured background
-surface.  Each surface ``S`` is a disparity function quadratic in the LEFT-view pixel
-coordinates, ``d_S(x, y) = Theta_S . U(x, y)`` with the paper's basis
+A textured foreground surface with an elliptic (or rectangular, L-shaped, blob) outline floats
+in front of a textured background surface.  Each surface ``S`` is a disparity function quadratic
+in the LEFT-view pixel coordinates, ``d_S(x, y) = Theta_S . U(x, y)`` with the paper's basis
 ``U = (x^2, xy, y^2, x, y, 1)`` (Sec. 3; 0-based pixels, x to the right, y down), and a scene
 point is named by the left-view coordinates ``(x, y)`` of its ray.  Its right-view position is
 ``x - d_S(x, y)`` (same row), and its colour is a texture sampled at ``(x, y)``, so one scene point
@@ -15,6 +15,11 @@ the nearer one (larger disparity).  The ground truth is therefore exact for the 
 ``disp_left`` is ``d_S`` at the pixel centres, and a left pixel is occluded (``occ_left``) when
 its point is not seen by the right camera: it projects outside the right image
 (``xr < -0.5``) or the foreground covers its right-view ray.
+
+Textures (:data:`TEXTURES`, per layer): ``"random"`` value noise (the default),
+``"low_contrast"`` value noise of a few grey levels around a brightness, ``"stripes"`` (a sinusoid
+of a given period and orientation) and ``"palette"`` (blobs coloured from a given palette, for
+camouflage: give both layers the same palette).
 
 Presets (:data:`PRESETS`): ``"easy"`` (128x96, fronto-parallel layers at 24 and 8 px),
 ``"slanted"`` (128x96, curved slanted foreground over a slanted background) and ``"tiny"``
@@ -35,7 +40,34 @@ import numpy as np
 from .io import Scene, save_scene
 from .metrics import BAND_RADIUS, band_from_foreground, boundary_from_foreground
 
-__all__ = ["PRESETS", "SceneSpec", "disparity_coefficients", "make_scene", "write_scene"]
+__all__ = ["OUTLINES", "PRESETS", "TEXTURES", "SceneSpec", "disparity_coefficients",
+           "make_scene", "write_scene"]
+
+#: Texture kinds and their parameters with defaults (``SceneSpec.texture_fg`` / ``texture_bg``:
+#: a dict with ``"kind"`` and any of these keys).  Lengths are pixels of surface coordinates,
+#: levels are in [0, 1]; ``cells`` None means ``SceneSpec.texture_cells``.
+#:
+#: - ``random``: value noise stretched to ``[low, low + contrast]``, plus a random colour tint of
+#:   amplitude ``tint``.
+#: - ``low_contrast``: the same noise spanning ``amplitude`` around ``brightness``.
+#: - ``stripes``: ``brightness +- contrast / 2`` (two random colours) modulated by a sinusoid of
+#:   ``period`` along the direction ``angle`` (degrees; 0: vertical stripes, varying along x),
+#:   random phase; ``mix`` blends in random value noise.
+#: - ``palette``: each point takes the colour of ``colours`` whose value-noise channel is the
+#:   largest there (blobs of about ``cells``, each colour equally likely).
+TEXTURES = {
+    "random": {"cells": None, "low": 0.1, "contrast": 0.8, "tint": 0.15},
+    "low_contrast": {"cells": None, "brightness": 0.12, "amplitude": 8 / 255, "tint": 0.01},
+    "stripes": {"cells": None, "period": 6.0, "angle": 0.0, "brightness": 0.5, "contrast": 0.6,
+                "mix": 0.0},
+    "palette": {"cells": (6.0,), "colours": ((0.35, 0.38, 0.22), (0.55, 0.5, 0.33),
+                                             (0.2, 0.24, 0.16), (0.62, 0.6, 0.52))},
+}
+
+#: Foreground outlines, each inside the box ``cx +- rx``, ``cy +- ry`` of ``SceneSpec.ellipse``:
+#: the ellipse; the box; the box without its top-right corner ``(x > cx - 0.1 rx,
+#: y < cy + 0.1 ry)``, an L; a fixed lobed blob.
+OUTLINES = ("ellipse", "rectangle", "L", "blob")
 
 
 def disparity_coefficients(d_centre: float, slope=(0.0, 0.0), curvature=(0.0, 0.0, 0.0),
@@ -80,8 +112,8 @@ class SceneSpec:
         the coefficients on ``U = (x^2, xy, y^2, x, y, 1)`` of left-view pixel coordinates (see
         :func:`disparity_coefficients`).
     ellipse : tuple of 4 float or None
-        Foreground outline ``(cx, cy, rx, ry)`` in left-view pixels; None: centred, radii a
-        quarter of the width and 0.29 of the height.
+        Foreground ellipse ``(cx, cy, rx, ry)`` in left-view pixels, or the box of another
+        ``outline``; None: centred, radii a quarter of the width and 0.29 of the height.
     texture_cells : tuple of float
         Cell sizes (pixels) of the value-noise octaves of the textures, averaged.
     noise : float
@@ -94,6 +126,13 @@ class SceneSpec:
         Shift of the ``init_ellipse`` centre from the true one, in pixels.
     band_radius : int
         Half-width of the evaluation band (``roi_fg`` / ``roi_bg``).
+    texture_fg, texture_bg : dict, str or None
+        Texture of each layer: ``{"kind": ..., **parameters}`` (:data:`TEXTURES`), or a kind
+        name with its default parameters; None: ``"random"``.
+    outline : str
+        Shape of the foreground (:data:`OUTLINES`) in the box of ``ellipse``.
+    d_max_step : int
+        ``d_max`` is rounded up to a multiple of this.
     """
 
     width: int = 128
@@ -107,6 +146,10 @@ class SceneSpec:
     init_scale: float = 0.7
     init_shift: tuple = (4.0, -3.0)
     band_radius: int = BAND_RADIUS
+    texture_fg: dict | str | None = None
+    texture_bg: dict | str | None = None
+    outline: str = "ellipse"
+    d_max_step: int = 2
 
 
 #: Named scenes: keyword overrides of :class:`SceneSpec`.
@@ -153,23 +196,52 @@ def _source_x(theta: np.ndarray, xr, y):
         return 2.0 * big_c / (big_b + np.sqrt(big_b * big_b - 4.0 * a * big_c))
 
 
-def _inside(ellipse, x, y):
+def _inside(ellipse, x, y, outline: str = "ellipse"):
+    """Whether the left-view points ``(x, y)`` lie inside the foreground (NaN: outside)."""
     cx, cy, rx, ry = ellipse
-    return ((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0
+    u, v = (x - cx) / rx, (y - cy) / ry
+    if outline == "ellipse":
+        return u ** 2 + v ** 2 <= 1.0
+    box = (np.abs(u) <= 1.0) & (np.abs(v) <= 1.0)
+    if outline == "rectangle":
+        return box
+    if outline == "L":
+        return box & ~((u > -0.1) & (v < 0.1))
+    angle = np.arctan2(v, u)
+    return np.hypot(u, v) <= (1.0 + 0.2 * np.cos(3 * angle + 0.7)
+                              + 0.1 * np.cos(5 * angle + 2.0)) / 1.3
 
 
-def _texture(rng, cells, x0: float, y0: float, x1: float, y1: float):
-    """A random RGB texture on the rectangle ``[x0, x1] x [y0, y1]`` of surface coordinates.
+def _texture_params(texture, name: str) -> tuple:
+    """``(kind, parameters)`` of a layer's texture: the defaults of :data:`TEXTURES` updated
+    with ``texture`` (a dict with ``kind``, a kind name, or None: ``"random"``)."""
+    if isinstance(texture, str):
+        texture = {"kind": texture}
+    if texture is not None and not isinstance(texture, dict):
+        raise ValueError(f"{name}: expected a dict such as {{'kind': 'stripes', 'period': 5}}, "
+                         f"a kind name or None, got {texture!r}")
+    given = dict(texture or {})
+    kind = given.pop("kind", "random")
+    if kind not in TEXTURES:
+        raise ValueError(f"{name}: unknown texture kind {kind!r}; valid: {', '.join(TEXTURES)}")
+    unknown = sorted(set(given) - set(TEXTURES[kind]))
+    if unknown:
+        raise ValueError(f"{name}: unknown parameter(s) {', '.join(unknown)} of a {kind!r} "
+                         f"texture; valid: kind, {', '.join(TEXTURES[kind])}")
+    params = {**TEXTURES[kind], **given}
+    if kind == "stripes" and not params["period"] > 0:
+        raise ValueError(f"{name}: stripes need a period > 0, got {params['period']}")
+    return kind, params
 
-    Value noise: for each cell size, uniform random values on a grid of that spacing,
-    interpolated bilinearly; the octaves are averaged, stretched to [0.1, 0.9] and tinted by a
-    random colour.  Returns ``lookup(x, y) -> (..., 3)`` float64.
-    """
+
+def _octave_sum(rng, cells, x0: float, y0: float, x1: float, y1: float, channels: int = 3):
+    """Value noise on the rectangle ``[x0, x1] x [y0, y1]``: for each cell size, uniform random
+    values on a grid of that spacing, interpolated bilinearly.  Returns ``lookup(x, y) ->
+    (..., channels)``, the sum over the cell sizes (each term in [0, 1])."""
     grids = []
     for cell in cells:
         nx, ny = int(math.ceil((x1 - x0) / cell)) + 2, int(math.ceil((y1 - y0) / cell)) + 2
-        grids.append((cell, rng.random((ny, nx, 3))))
-    tint = 0.15 * (rng.random(3) - 0.5)
+        grids.append((cell, rng.random((ny, nx, channels))))
 
     def lookup(x, y):
         total = 0.0
@@ -180,7 +252,46 @@ def _texture(rng, cells, x0: float, y0: float, x1: float, y1: float):
             fx, fy = (gx - ix)[..., None], (gy - iy)[..., None]
             total = total + ((1 - fy) * ((1 - fx) * grid[iy, ix] + fx * grid[iy, ix + 1])
                              + fy * ((1 - fx) * grid[iy + 1, ix] + fx * grid[iy + 1, ix + 1]))
-        return np.clip(0.1 + 0.8 * total / len(grids) + tint, 0.0, 1.0)
+        return total
+
+    return lookup
+
+
+def _texture(rng, texture, cells, box: tuple, name: str):
+    """A texture of :data:`TEXTURES` on the rectangle ``box = (x0, y0, x1, y1)`` of surface
+    coordinates; ``cells``: the default cell sizes.  Returns ``lookup(x, y) -> (..., 3)``
+    float64 in [0, 1]."""
+    kind, p = _texture_params(texture, name)
+    cells = tuple(p["cells"] if p["cells"] is not None else cells)
+    if kind == "palette":
+        colours = np.asarray(p["colours"], dtype=np.float64)
+        noise = _octave_sum(rng, cells, *box, channels=len(colours))
+        return lambda x, y: colours[np.argmax(noise(x, y), axis=-1)]
+    if kind == "stripes":
+        return _stripes(rng, p, cells, box)
+    if kind == "low_contrast":
+        p = {"low": p["brightness"] - p["amplitude"] / 2, "contrast": p["amplitude"],
+             "tint": p["tint"]}
+    noise = _octave_sum(rng, cells, *box)
+    tint = p["tint"] * (rng.random(3) - 0.5)
+    return lambda x, y: np.clip(p["low"] + p["contrast"] * noise(x, y) / len(cells) + tint,
+                                0.0, 1.0)
+
+
+def _stripes(rng, p: dict, cells, box: tuple):
+    """The ``"stripes"`` texture of :data:`TEXTURES` (see :func:`_texture`)."""
+    phase = 2 * math.pi * rng.random()
+    dark, light = (p["brightness"] + sign * p["contrast"] / 2 + 0.1 * (rng.random(3) - 0.5)
+                   for sign in (-1, 1))
+    noise = _octave_sum(rng, cells, *box) if p["mix"] > 0 else None
+    angle = math.radians(p["angle"])
+
+    def lookup(x, y):
+        t = 2 * math.pi * (x * math.cos(angle) + y * math.sin(angle)) / p["period"] + phase
+        value = dark + (light - dark) * (0.5 + 0.5 * np.sin(t))[..., None]
+        if noise is not None:
+            value = (1 - p["mix"]) * value + p["mix"] * (0.1 + 0.8 * noise(x, y) / len(cells))
+        return np.clip(value, 0.0, 1.0)
 
     return lookup
 
@@ -191,6 +302,10 @@ def _check(spec: SceneSpec, theta_fg, theta_bg, ellipse, pad: int) -> None:
         raise ValueError(f"width, height: expected at least 8 pixels, got {spec.width}x{spec.height}")
     if ellipse[2] <= 0 or ellipse[3] <= 0:
         raise ValueError(f"ellipse: expected radii > 0, got {ellipse}")
+    if spec.outline not in OUTLINES:
+        raise ValueError(f"outline: unknown {spec.outline!r}; valid: {', '.join(OUTLINES)}")
+    if int(spec.d_max_step) != spec.d_max_step or spec.d_max_step < 1:
+        raise ValueError(f"d_max_step: expected a positive integer, got {spec.d_max_step}")
     if not 0.0 <= spec.noise <= 1.0:
         raise ValueError(f"noise: expected a standard deviation in [0, 1], got {spec.noise}")
     y, x = np.mgrid[0:spec.height, -pad:spec.width + pad].astype(np.float64)
@@ -204,12 +319,12 @@ def _check(spec: SceneSpec, theta_fg, theta_bg, ellipse, pad: int) -> None:
             raise ValueError(f"{name}: d/dx must stay below 0.9 (the surface must not fold in "
                              f"the right view), max is {dx.max():.3g}")
     y, x = y[:, pad:-pad], x[:, pad:-pad]
-    inside = _inside(ellipse, x, y)
+    inside = _inside(ellipse, x, y, spec.outline)
     if not inside.any():
         raise ValueError(f"ellipse: {ellipse} covers no pixel of the {spec.width}x{spec.height} image")
     if (_disparity(theta_fg, x, y) <= _disparity(theta_bg, x, y))[inside].any():
         raise ValueError("d_fg, d_bg: the foreground must be in front of the background "
-                         "(larger disparity) everywhere inside the ellipse")
+                         "(larger disparity) everywhere inside the outline")
 
 
 def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene:
@@ -230,8 +345,9 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
         ``left``, ``right`` float32 (H, W, 3); ``disp_left`` float32 (H, W), finite everywhere;
         ``fg_left``, ``occ_left``, ``boundary`` (:func:`~lss_kernels.metrics.boundary_from_foreground`)
         and ``roi_fg`` / ``roi_bg`` (:func:`~lss_kernels.metrics.band_from_foreground`), bool
-        (H, W); ``d_max`` the smallest even integer >= max(disp_left) + 2; ``init_ellipse`` the
-        true ellipse scaled by ``init_scale`` and shifted by ``init_shift``;
+        (H, W); ``d_max`` the smallest multiple of ``d_max_step`` (default 2) >=
+        max(disp_left) + 2; ``init_ellipse`` the true ellipse (the box's ellipse for other
+        outlines) scaled by ``init_scale`` and shifted by ``init_shift``;
         ``init_ellipse_cyclopean`` the same moved by ``-d_fg(centre) / 2`` in x; ``meta`` the
         preset, the seed and the spec.
     """
@@ -252,11 +368,12 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
     _check(spec, theta_fg, theta_bg, ellipse, pad)
 
     rng = np.random.default_rng(seed)
-    tex_fg = _texture(rng, spec.texture_cells, -pad, -1.0, w + pad, h + 1.0)
-    tex_bg = _texture(rng, spec.texture_cells, -pad, -1.0, w + pad, h + 1.0)
+    box = (-pad, -1.0, w + pad, h + 1.0)
+    tex_fg = _texture(rng, spec.texture_fg, spec.texture_cells, box, "texture_fg")
+    tex_bg = _texture(rng, spec.texture_bg, spec.texture_cells, box, "texture_bg")
 
     # Left view: the pixel's own ray.
-    fg = _inside(ellipse, x, y)
+    fg = _inside(ellipse, x, y, spec.outline)
     d_left = np.where(fg, _disparity(theta_fg, x, y), _disparity(theta_bg, x, y))
     left = np.where(fg[..., None], tex_fg(x, y), tex_bg(x, y))
 
@@ -265,7 +382,7 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
     if np.isnan(xs_bg).any():
         raise ValueError("d_bg: the background does not cover the right view; reduce its "
                          "curvature")
-    fg_right = _inside(ellipse, xs_fg, y) & (
+    fg_right = _inside(ellipse, xs_fg, y, spec.outline) & (
         _disparity(theta_fg, xs_fg, y) > _disparity(theta_bg, xs_bg, y))
     xs = np.where(fg_right, xs_fg, xs_bg)
     right = np.where(fg_right[..., None], tex_fg(xs, y), tex_bg(xs, y))
@@ -274,7 +391,8 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
     # z-buffer picks the other surface on its right-view ray.
     xr = x - d_left
     xs_fg, xs_bg = _source_x(theta_fg, xr, y), _source_x(theta_bg, xr, y)
-    covered_bg = ~fg & _inside(ellipse, xs_fg, y) & (_disparity(theta_fg, xs_fg, y) > d_left)
+    covered_bg = ~fg & _inside(ellipse, xs_fg, y, spec.outline) & (
+        _disparity(theta_fg, xs_fg, y) > d_left)
     covered_fg = fg & (_disparity(theta_bg, xs_bg, y) >= d_left)
     occ = (xr < -0.5) | covered_bg | covered_fg
 
@@ -285,9 +403,10 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
             rx * spec.init_scale, ry * spec.init_scale)
     d_centre = float(_disparity(theta_fg, cx, cy))
     name = f"{preset or 'custom'}_seed{seed}"
+    step = int(spec.d_max_step)
     return Scene(
         name=name, left=left, right=right,
-        d_max=float(2 * math.ceil((d_left.max() + 2.0) / 2.0)),
+        d_max=float(step * math.ceil((d_left.max() + 2.0) / step)),
         init_ellipse=init,
         init_ellipse_cyclopean=(init[0] - d_centre / 2.0,) + init[1:],
         disp_left=d_left.astype(np.float32), fg_left=fg, occ_left=occ,
@@ -316,8 +435,16 @@ def _jsonable(value):
     return value.item() if isinstance(value, np.generic) else value
 
 
-def write_scene(folder, preset: str | None = "easy", *, seed: int = 0, **params) -> Scene:
-    """:func:`make_scene` then :func:`lss_kernels.io.save_scene` into ``folder``; returns the scene."""
+def write_scene(folder, preset: str | None = "easy", *, seed: int = 0, name: str | None = None,
+                meta: dict | None = None, **params) -> Scene:
+    """:func:`make_scene` then :func:`lss_kernels.io.save_scene` into ``folder``; returns the scene.
+
+    ``name`` replaces the scene's name and ``meta`` is merged into its ``meta`` (both are
+    written to ``meta.json``).
+    """
     scene = make_scene(preset, seed=seed, **params)
+    if name is not None:
+        scene.name = name
+    scene.meta.update(meta or {})
     save_scene(folder, scene)
     return scene

@@ -150,3 +150,72 @@ def test_errors(kwargs, message):
     preset = kwargs.pop("preset", "easy")
     with pytest.raises(ValueError, match=message):
         make_scene(preset, **kwargs)
+
+
+#: sha256 of (left, right, disp_left, fg_left, occ_left, roi_fg, roi_bg, boundary) bytes,
+#: computed before textures and outlines were added: the presets' pixels must not change.
+PRESET_SHA256 = [
+    ("easy", 0, {}, "8406edb13dde5b46c914594de14f4fc07be877e99030f8990cb3d1e6fa8f5578"),
+    ("slanted", 0, {}, "7238e1ff4282542461ec89d9c3e5422f7d8d703863fa7d1b5a699fe5f4e2a40f"),
+    ("tiny", 0, {}, "2e272551390b347eb058e76df0a32777e49d5bc1fec459d9ae2daedcff4f8905"),
+    ("tiny", 7, {"noise": 0.05, "quantize": False},
+     "0dea8dd6a60bce19b23d61fe49fc25e04c9aaeb73940d54fabed4fb4cb0070a6"),
+]
+
+
+@pytest.mark.parametrize("preset, seed, extra, digest", PRESET_SHA256)
+def test_presets_are_unchanged(preset, seed, extra, digest):
+    import hashlib
+    scene = make_scene(preset, seed=seed, **extra)
+    h = hashlib.sha256()
+    for key in ("left", "right", "disp_left", "fg_left", "occ_left", "roi_fg", "roi_bg",
+                "boundary"):
+        h.update(np.ascontiguousarray(getattr(scene, key)).tobytes())
+    assert h.hexdigest() == digest
+    assert scene.d_max == {"easy": 26.0, "slanted": 26.0, "tiny": 14.0}[preset]
+
+
+@pytest.mark.parametrize("outline, texture_fg, texture_bg", [
+    ("rectangle", {"kind": "stripes", "period": 4.0}, None),
+    ("L", {"kind": "palette"}, "palette"),
+    ("blob", {"kind": "low_contrast", "amplitude": 0.1}, {"kind": "stripes", "angle": 30.0,
+                                                           "mix": 0.3}),
+])
+def test_outlines_and_textures_keep_the_truth_exact(outline, texture_fg, texture_bg):
+    """Integer disparities: every visible left pixel lands on a right pixel of the same colour,
+    whatever the outline and the textures; the outline lies in the box of ``ellipse``."""
+    scene = make_scene("easy", seed=3, outline=outline, texture_fg=texture_fg,
+                       texture_bg=texture_bg, d_max_step=16)
+    y, x = _grid(scene)
+    xr = x - scene.disp_left.astype(int)
+    visible = ~scene.occ_left
+    assert (xr[visible] >= 0).all() and not (scene.occ_left & scene.fg_left).any()
+    np.testing.assert_allclose(scene.left[visible], scene.right[y[visible], xr[visible]],
+                               atol=1e-5)
+    cx, cy, rx, ry = scene.meta["ellipse"]
+    box = (np.abs(x - cx) <= rx) & (np.abs(y - cy) <= ry)
+    assert scene.fg_left.any() and not (scene.fg_left & ~box).any()
+    if outline == "rectangle":
+        np.testing.assert_array_equal(scene.fg_left, box)
+    assert scene.d_max == 32.0 and scene.meta["spec"]["outline"] == outline
+
+
+def test_stripes_texture_is_periodic_along_x():
+    scene = make_scene("easy", texture_bg={"kind": "stripes", "period": 5.0})
+    row = scene.left[2].astype(np.float64)                  # a background row
+    np.testing.assert_allclose(row[5:], row[:-5], atol=1.5 / 255)
+    assert np.abs(row[1:] - row[:-1]).max() > 0.1
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"texture_fg": {"kind": "plaid"}}, "texture_fg: unknown texture kind 'plaid'"),
+    ({"texture_bg": {"kind": "stripes", "width": 3}}, "texture_bg: unknown parameter.*width"),
+    ({"texture_fg": {"kind": "stripes", "period": 0}}, "stripes need a period > 0"),
+    ({"texture_fg": 3}, "texture_fg: expected a dict"),
+    ({"texture_bg": "stripy"}, "texture_bg: unknown texture kind 'stripy'"),
+    ({"outline": "star"}, "outline: unknown 'star'"),
+    ({"d_max_step": 0}, "d_max_step: expected a positive integer"),
+])
+def test_texture_and_outline_errors(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        make_scene("easy", **kwargs)

@@ -1,0 +1,287 @@
+"""A stress set of hard rendered two-layer scenes with exact ground truth.
+
+Seven families (:data:`STRESS_FAMILIES`) of four scenes each, rendered by
+:mod:`lss_kernels.scenes` into scene folders (``docs/scene-format.md``): periodic stripes,
+camouflage, weak and dark textures, curved backgrounds, wide occlusions, poor starts and
+non-elliptic outlines.  Geometry is given for the ``"medium"`` size (320x240) and scaled with
+the image (disparities, positions, radii); texture scales (stripe periods, cells) and grey
+levels are kept in pixels and levels.  ``d_max`` is the true maximum + 2 rounded up to a
+multiple of 16; ``init_ellipse`` is a hand-placed ellipse: about the object's box (radii
+0.9-1.05 of it, a few pixels off centre), except in the ``init`` family.  ``meta.json`` also
+holds ``family`` and ``description``.
+
+Examples
+--------
+>>> folders = write_stress_set("/tmp/stress", seed=0, size="small")
+
+Command line::
+
+    python -m lss_kernels.stress OUT [--seed S] [--size small|medium]
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .scenes import disparity_coefficients, write_scene
+
+__all__ = ["SIZES", "STRESS_FAMILIES", "stress_specs", "write_stress_set"]
+
+#: What each family tests.
+STRESS_FAMILIES = {
+    "periodic": "vertical stripes of period 3-8 px on the foreground, the background or both",
+    "camouflage": "foreground and background drawn from the same texture statistics or palette",
+    "weak": "low-contrast textures of a few grey levels, mid-grey or dark, on fg, bg or both",
+    "curved": "sphere-like (quadratic bowl) and cylinder-like backgrounds behind the object",
+    "jump": "foreground 40-60 px nearer than the background: wide occlusion strips",
+    "init": "hand ellipses covering about half of the object or spilling 30 % beyond it",
+    "shape": "non-elliptic outlines: a rectangle, an L and a blob",
+}
+
+#: Image sizes (width, height); the families' geometry is written for "medium".
+SIZES = {"small": (160, 120), "medium": (320, 240)}
+
+_OBJECT = (165.0, 120.0, 70.0, 75.0)        # default (cx, cy, rx, ry), medium pixels
+_D_MAX_STEP = 16
+
+
+def _stripes(period, **extra) -> dict:
+    """A vertical ``"stripes"`` texture of ``period`` pixels."""
+    return {"kind": "stripes", "period": float(period), **extra}
+
+
+def _weak(amplitude_levels, brightness) -> dict:
+    """A ``"low_contrast"`` texture spanning ``amplitude_levels`` 8-bit grey levels."""
+    return {"kind": "low_contrast", "amplitude": amplitude_levels / 255, "brightness": brightness}
+
+
+def _palette(rng, n_colours: int, cell: float) -> dict:
+    """A palette texture of ``n_colours`` random colours near one random base colour."""
+    base = rng.uniform(0.25, 0.6, 3)
+    colours = np.clip(base + rng.uniform(-0.18, 0.18, (n_colours, 3)), 0.05, 0.95)
+    return {"kind": "palette", "cells": (cell,), "colours": [list(map(float, c)) for c in colours]}
+
+
+def _periodic(rng) -> list:
+    """The family's scenes as ``(variant, description, parameters in medium pixels)``."""
+    return [
+        ("fg_p3", "stripes of period 3 on the foreground",
+         {"d_fg": 30, "d_bg": 12, "texture_fg": _stripes(3)}),
+        ("bg_p6", "stripes of period 6 on the background, slanted foreground",
+         {"d_fg": {"d": 28, "slope": (0.04, 0.02)}, "d_bg": 10, "texture_bg": _stripes(6)}),
+        ("both_p5_p8", "stripes of period 5 (fg) and 8 (bg)",
+         {"d_fg": 34, "d_bg": 14, "texture_fg": _stripes(5), "texture_bg": _stripes(8)}),
+        ("both_p7", "stripes of period 7 on both layers, a little noise on the fg",
+         {"d_fg": {"d": 32, "slope": (-0.04, 0.0)}, "d_bg": 12,
+          "texture_fg": _stripes(7, mix=0.15), "texture_bg": _stripes(7)}),
+    ]
+
+
+def _camouflage(rng) -> list:
+    """As :func:`_periodic`; ``rng`` draws the palettes."""
+    fine, coarse = _palette(rng, 4, 5.0), _palette(rng, 3, 12.0)
+    same = {"kind": "random", "tint": 0.0}
+    noisy = {"kind": "random", "tint": 0.0, "cells": (3.0, 8.0)}
+    return [
+        ("palette_fine", "one 4-colour palette of 5 px blobs on both layers",
+         {"d_fg": 30, "d_bg": 12, "texture_fg": fine, "texture_bg": fine}),
+        ("palette_coarse", "one 3-colour palette of 12 px blobs on both layers, slanted bg",
+         {"d_fg": 36, "d_bg": {"d": 14, "slope": (-0.03, 0.02)}, "texture_fg": coarse,
+          "texture_bg": coarse}),
+        ("noise_same", "untinted value noise of the same cells on both layers",
+         {"d_fg": 26, "d_bg": 12, "texture_fg": same, "texture_bg": same}),
+        ("noise_noisy", "untinted value noise of 3 and 8 px cells on both layers, noise 0.02",
+         {"d_fg": 30, "d_bg": 10, "texture_fg": noisy, "texture_bg": noisy, "noise": 0.02}),
+    ]
+
+
+def _weak_family(rng) -> list:
+    """As :func:`_periodic`."""
+    return [
+        ("fg_grey", "12 grey levels on a mid-grey foreground",
+         {"d_fg": 30, "d_bg": 12, "texture_fg": _weak(12, 0.45)}),
+        ("bg_dark", "8 grey levels on a dark background",
+         {"d_fg": 30, "d_bg": 10, "texture_bg": _weak(8, 0.10)}),
+        ("both_grey", "10 grey levels on both layers, mid-grey",
+         {"d_fg": 28, "d_bg": 12, "texture_fg": _weak(10, 0.45), "texture_bg": _weak(10, 0.52)}),
+        ("both_dark", "16 grey levels on both layers, dark, 1 level of noise",
+         {"d_fg": 32, "d_bg": 12, "texture_fg": _weak(16, 0.08), "texture_bg": _weak(16, 0.11),
+          "noise": 1 / 255}),
+    ]
+
+
+def _curved(rng) -> list:
+    """As :func:`_periodic`; the curvatures are about the object's centre."""
+    return [
+        ("bowl", "sphere-like bowl background (26 px at the centre, 5-7 at the corners), flat fg",
+         {"d_fg": 44, "d_bg": {"d": 26, "curvature": (-0.0005, 0.0, -0.0005)}}),
+        ("cylinder_x", "cylinder background curved along x, slanted fg",
+         {"d_fg": {"d": 42, "slope": (0.08, 0.03)},
+          "d_bg": {"d": 26, "curvature": (-0.0007, 0.0, 0.0)}}),
+        ("ball_dark", "dark weakly textured ball behind the object",
+         {"d_fg": 40, "d_bg": {"d": 28, "curvature": (-0.0006, 0.0, -0.0006)},
+          "texture_bg": _weak(10, 0.12)}),
+        ("cylinder_y", "cylinder background curved along y, flat fg",
+         {"d_fg": 38, "d_bg": {"d": 24, "curvature": (0.0, 0.0, -0.0009)}}),
+    ]
+
+
+def _jump(rng) -> list:
+    """As :func:`_periodic`; objects right of centre leave room for the occluded strip."""
+    return [
+        ("40", "foreground 40 px in front of the background",
+         {"d_fg": 50, "d_bg": 10, "ellipse": (195.0, 120.0, 60.0, 70.0)}),
+        ("50_slanted", "about 50 px in front, both layers slanted",
+         {"d_fg": {"d": 62, "slope": (0.05, 0.02)}, "d_bg": {"d": 12, "slope": (-0.03, 0.0)},
+          "ellipse": (200.0, 120.0, 60.0, 70.0)}),
+        ("60_narrow", "60 px in front, object 90 px wide",
+         {"d_fg": 68, "d_bg": 8, "ellipse": (200.0, 120.0, 45.0, 70.0)}),
+        ("60_far", "60 px in front of a background at 30 px (d_max 96)",
+         {"d_fg": 90, "d_bg": 30, "ellipse": (205.0, 120.0, 60.0, 70.0)}),
+    ]
+
+
+def _init(rng) -> list:
+    """As :func:`_periodic`; ``init_shift`` in radii of the object."""
+    base = {"d_fg": 32, "d_bg": 12}
+    return [
+        ("half_inside", "a centred ellipse covering about half of the object",
+         {**base, "init_scale": 0.71, "init_shift": (0.0, 0.0)}),
+        ("half_side", "an ellipse over the right half of the object",
+         {**base, "init_scale": 0.75, "init_shift": (0.5, 0.0)}),
+        ("spill30", "an ellipse 30 % larger than the object",
+         {**base, "init_scale": 1.3, "init_shift": (0.0, 0.0)}),
+        ("spill30_left", "an ellipse spilling 30 % beyond the object's left edge",
+         {**base, "init_scale": 1.15, "init_shift": (-0.15, 0.0)}),
+    ]
+
+
+def _shape(rng) -> list:
+    """As :func:`_periodic`; ``ellipse`` is the box of the outline."""
+    return [
+        ("rectangle", "a fronto-parallel rectangle",
+         {"d_fg": 30, "d_bg": 10, "outline": "rectangle", "ellipse": (165.0, 120.0, 65.0, 60.0)}),
+        ("L", "an L-shaped object",
+         {"d_fg": 32, "d_bg": 12, "outline": "L", "ellipse": (165.0, 120.0, 70.0, 75.0)}),
+        ("blob", "a lobed blob, slanted",
+         {"d_fg": {"d": 32, "slope": (0.05, -0.03)}, "d_bg": 12, "outline": "blob",
+          "ellipse": (165.0, 120.0, 85.0, 85.0)}),
+        ("L_curved", "an L, slanted, over a cylinder background",
+         {"d_fg": {"d": 40, "slope": (-0.04, 0.04)},
+          "d_bg": {"d": 24, "curvature": (-0.0006, 0.0, 0.0)}, "outline": "L",
+          "ellipse": (170.0, 115.0, 75.0, 70.0)}),
+    ]
+
+
+_FAMILY_SCENES = {"periodic": _periodic, "camouflage": _camouflage, "weak": _weak_family,
+                  "curved": _curved, "jump": _jump, "init": _init, "shape": _shape}
+
+
+def _layer(value, scale: float, centre) -> tuple:
+    """Disparity coefficients of a layer given in medium pixels (a number or a dict of
+    ``d``, ``slope``, ``curvature`` about ``centre``), for an image ``scale`` times medium."""
+    layer = value if isinstance(value, dict) else {"d": value}
+    curvature = tuple(c / scale for c in layer.get("curvature", (0.0, 0.0, 0.0)))
+    return disparity_coefficients(layer["d"] * scale, layer.get("slope", (0.0, 0.0)), curvature,
+                                  (centre[0] * scale, centre[1] * scale))
+
+
+def _placed(params: dict, rng, scale: float) -> dict:
+    """make_scene keywords from a family's medium-size parameters: the object jittered by a
+    few pixels, the layers and the hand ellipse scaled to the image (``init_shift`` is given in
+    radii of the object)."""
+    params = dict(params)
+    cx, cy, rx, ry = params.pop("ellipse", _OBJECT)
+    centre = (cx, cy)
+    cx, cy = cx + rng.uniform(-6, 6), cy + rng.uniform(-6, 6)
+    rx, ry = rx * rng.uniform(0.95, 1.05), ry * rng.uniform(0.95, 1.05)
+    hand_scale = rng.uniform(0.9, 1.05)
+    hand_shift = (rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05))
+    shift = params.pop("init_shift", hand_shift)
+    return {**params,
+            "d_fg": _layer(params["d_fg"], scale, centre),
+            "d_bg": _layer(params["d_bg"], scale, centre),
+            "ellipse": (cx * scale, cy * scale, rx * scale, ry * scale),
+            "init_scale": float(params.get("init_scale", hand_scale)),
+            "init_shift": (shift[0] * rx * scale, shift[1] * ry * scale)}
+
+
+def stress_specs(seed: int = 0, size: str = "medium") -> list:
+    """The stress scenes as ``(name, keywords)``: ``write_scene(folder, None, name=name,
+    **keywords)`` renders one.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the textures, the palettes and the jitter of the objects; equal seeds give
+        identical scenes.
+    size : str
+        A key of :data:`SIZES`.
+
+    Returns
+    -------
+    list of (str, dict)
+        Names ``FAMILY_VARIANT``, family by family in the order of :data:`STRESS_FAMILIES`.
+    """
+    if size not in SIZES:
+        raise ValueError(f"size: unknown {size!r}; valid: {', '.join(SIZES)}")
+    width, height = SIZES[size]
+    scale = width / SIZES["medium"][0]
+    rng = np.random.default_rng(seed)
+    specs = []
+    for family in STRESS_FAMILIES:
+        for variant, description, params in _FAMILY_SCENES[family](rng):
+            name = f"{family}_{variant}"
+            keywords = _placed(params, rng, scale)
+            keywords.update(width=width, height=height, d_max_step=_D_MAX_STEP,
+                            seed=int(seed) * 1000 + len(specs),
+                            meta={"family": family, "description": description,
+                                  "stress_seed": int(seed), "size": size})
+            specs.append((name, keywords))
+    return specs
+
+
+def write_stress_set(out_dir, seed: int = 0, size: str = "medium") -> list:
+    """Write every scene of :func:`stress_specs` into ``out_dir/NAME``; returns the folders."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"out_dir: {out} exists and is not a folder")
+    folders = []
+    for name, keywords in stress_specs(seed, size):
+        write_scene(out / name, None, name=name, **keywords)
+        folders.append(out / name)
+    return folders
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def main(argv=None) -> int:
+    """``python -m lss_kernels.stress OUT [--seed S] [--size small|medium]``."""
+    parser = _Parser(prog="python -m lss_kernels.stress",
+                     description="Write the stress set of hard rendered two-layer scenes "
+                                 "(docs/stress.md) as scene folders under OUT.")
+    parser.add_argument("out", metavar="OUT", help="output folder (created if needed)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the set (default 0)")
+    parser.add_argument("--size", choices=list(SIZES), default="medium",
+                        help="image size: small 160x120, medium 320x240 (default)")
+    args = parser.parse_args(argv)
+    try:
+        folders = write_stress_set(args.out, args.seed, args.size)
+    except (ValueError, OSError) as exc:
+        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        return 1
+    print(f"wrote {len(folders)} scenes ({len(STRESS_FAMILIES)} families, {args.size}, "
+          f"seed {args.seed}) to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,175 @@
+"""The stress set: hard rendered scenes whose folders load and whose ground truth holds what
+each family promises (periodic stripes, low contrast, wide occlusions, poor starts)."""
+import numpy as np
+import pytest
+
+from lss_kernels import stress
+from lss_kernels.io import list_scenes, load_scene
+from lss_kernels.metrics import score
+from lss_kernels.scenes import make_scene
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory):
+    """The small set of seed 0, written and read back, by name."""
+    out = tmp_path_factory.mktemp("stress")
+    folders = stress.write_stress_set(out, seed=0, size="small")
+    assert sorted(map(str, folders)) == sorted(map(str, list_scenes(out)))
+    return {s.name: s for s in map(load_scene, folders)}
+
+
+def _grey(scene):
+    return scene.left.astype(np.float64).mean(axis=-1)
+
+
+def _period(signal, lags=range(2, 13)):
+    """The lag of the largest normalised autocorrelation of a 1-D signal."""
+    z = signal - signal.mean()
+    corr = [np.dot(z[:-k], z[k:]) / np.sqrt(np.dot(z[:-k], z[:-k]) * np.dot(z[k:], z[k:]))
+            for k in lags]
+    return list(lags)[int(np.argmax(corr))], max(corr)
+
+
+def _layers(scene, kind):
+    """``(mask, texture)`` of the left-view layers whose texture is of ``kind``."""
+    spec = scene.meta["spec"]
+    return [(mask, spec[key]) for mask, key in ((scene.fg_left, "texture_fg"),
+                                                (~scene.fg_left, "texture_bg"))
+            if (spec[key] or {}).get("kind") == kind]
+
+
+def test_families_and_names(scenes):
+    specs = stress.stress_specs(seed=0, size="small")
+    names = [name for name, _ in specs]
+    assert len(names) >= 24 and len(set(names)) == len(names) == len(scenes)
+    families = {}
+    for scene in scenes.values():
+        families.setdefault(scene.meta["family"], []).append(scene.name)
+        assert scene.name.startswith(scene.meta["family"] + "_") and scene.meta["description"]
+    assert set(families) == set(stress.STRESS_FAMILIES) and len(families) >= 6
+    assert all(3 <= len(v) <= 4 for v in families.values()), families
+
+
+def test_ground_truth_is_consistent(scenes):
+    for name, scene in scenes.items():
+        h, w = scene.fg_left.shape
+        assert (w, h) == stress.SIZES["small"] and scene.left.shape == scene.right.shape
+        assert not (scene.occ_left & scene.fg_left).any(), name
+        assert 0.05 < scene.fg_left.mean() < 0.5, name
+        assert 0.0 < scene.occ_left.mean() < 0.3, name
+        assert np.isfinite(scene.disp_left).all() and scene.disp_left.min() >= 0, name
+        assert scene.disp_left.max() + 2 <= scene.d_max and scene.d_max % 16 == 0, name
+        # The foreground is nearer than the background next to it, and touches no border.
+        assert scene.disp_left[scene.fg_left].min() > np.median(scene.disp_left[~scene.fg_left])
+        assert not (scene.fg_left[0].any() or scene.fg_left[-1].any()
+                    or scene.fg_left[:, 0].any() or scene.fg_left[:, -1].any()), name
+        assert scene.init_ellipse is not None and scene.init_ellipse_cyclopean is not None
+        s = score(scene.disp_left, scene.occ_left, scene)
+        assert (s["occ_f1"], s["bad4"]) == (1.0, 0.0) and s["n_true_occ"] > 0, name
+
+
+def test_stripes_are_periodic(scenes):
+    striped = [s for s in scenes.values() if s.meta["family"] == "periodic"]
+    assert len(striped) >= 3
+    checked = 0
+    for scene in striped:
+        grey = _grey(scene)
+        for mask, texture in _layers(scene, "stripes"):
+            rows = np.flatnonzero(mask.sum(axis=1) >= 40)
+            y = rows[len(rows) // 2]
+            xs = np.flatnonzero(mask[y])
+            run = xs[(xs >= xs[0]) & (xs < xs[0] + 40)]     # 40 contiguous pixels of the layer
+            assert np.array_equal(run, np.arange(run[0], run[0] + 40))
+            lag, corr = _period(grey[y, run])
+            assert lag == round(texture["period"]) and corr > 0.8, (scene.name, lag, corr)
+            checked += 1
+    assert checked >= 5
+
+
+def test_weak_textures_are_low_contrast(scenes):
+    weak = [s for s in scenes.values() if s.meta["family"] == "weak"]
+    assert len(weak) >= 3 and any(s.meta["spec"]["noise"] > 0 for s in weak)
+    checked = 0
+    for scene in weak + [scenes["curved_ball_dark"]]:
+        grey = _grey(scene)
+        for mask, texture in _layers(scene, "low_contrast"):
+            values = grey[mask] * 255
+            assert values.std() < 3.0, scene.name
+            assert np.percentile(values, 99) - np.percentile(values, 1) <= 20, scene.name
+            assert abs(values.mean() - 255 * texture["brightness"]) < 6, scene.name
+            checked += 1
+    assert checked >= 6
+    assert sum(_grey(s).mean() < 0.15 for s in weak) >= 1          # a dark pair
+
+
+def test_curved_backgrounds_are_not_planes(scenes):
+    for scene in (s for s in scenes.values() if s.meta["family"] == "curved"):
+        bg = ~scene.fg_left
+        y, x = np.nonzero(bg)
+        a = np.stack([x, y, np.ones_like(x)], -1).astype(np.float64)
+        d = scene.disp_left[bg].astype(np.float64)
+        residual = d - a @ np.linalg.lstsq(a, d, rcond=None)[0]
+        assert np.abs(residual).max() > 2.0, scene.name
+
+
+def test_wide_occlusions(scenes):
+    """The jump family's occluded strip left of the object is as wide as the jump (>= 20 px at
+    the small size) and its d_max reaches 48."""
+    jumps = [s for s in scenes.values() if s.meta["family"] == "jump"]
+    for scene in jumps:
+        y = int(np.argmax(scene.fg_left.sum(axis=1)))
+        edge = np.flatnonzero(scene.fg_left[y])[0]
+        run = 0
+        while run < edge and scene.occ_left[y, edge - 1 - run]:
+            run += 1
+        assert run >= 19, (scene.name, run)
+    assert max(s.d_max for s in jumps) == 48
+
+
+def test_init_family_starts(scenes):
+    """Half covers: about half of the object; spills: the whole object and 30 % more."""
+    for name, (lo, hi) in {"init_half_inside": (0.4, 0.6), "init_half_side": (0.35, 0.65)}.items():
+        scene = scenes[name]
+        h, w = scene.fg_left.shape
+        y, x = np.mgrid[0:h, 0:w]
+        cx, cy, rx, ry = scene.init_ellipse
+        init = ((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1
+        assert lo < (init & scene.fg_left).sum() / scene.fg_left.sum() < hi, name
+    for name in ("init_spill30", "init_spill30_left"):
+        scene = scenes[name]
+        cx, cy, rx, ry = scene.init_ellipse
+        tcx, tcy, trx, try_ = scene.meta["ellipse"]
+        assert rx * ry >= 1.3 * trx * try_ and cx - rx <= tcx - 1.3 * trx + 1e-9, name
+
+
+def test_generation_is_deterministic_per_seed():
+    a, b = stress.stress_specs(seed=3, size="small"), stress.stress_specs(seed=3, size="small")
+    assert a == b and a != stress.stress_specs(seed=4, size="small")
+    name, keywords = a[5]
+    kwargs = {k: v for k, v in keywords.items() if k != "meta"}
+    one, two = make_scene(None, **kwargs), make_scene(None, **kwargs)
+    for key in ("left", "right", "disp_left", "occ_left"):
+        np.testing.assert_array_equal(getattr(one, key), getattr(two, key), err_msg=name)
+
+
+def test_medium_size_scales_the_geometry():
+    small = dict(stress.stress_specs(seed=0, size="small"))
+    medium = dict(stress.stress_specs(seed=0, size="medium"))
+    assert (medium["jump_60_far"]["width"], medium["jump_60_far"]["height"]) == (320, 240)
+    np.testing.assert_allclose(medium["jump_60_far"]["ellipse"],
+                               2 * np.asarray(small["jump_60_far"]["ellipse"]))
+    assert medium["jump_60_far"]["d_fg"][5] == pytest.approx(2 * small["jump_60_far"]["d_fg"][5])
+
+
+def test_command_line(tmp_path, capsys):
+    assert stress.main([str(tmp_path / "set"), "--size", "small", "--seed", "2"]) == 0
+    assert len(list_scenes(tmp_path / "set")) == len(stress.stress_specs())
+    assert "wrote" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exc:
+        stress.main([str(tmp_path / "x"), "--size", "huge"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and len(err.strip().splitlines()) == 1 and "--size" in err
+    (tmp_path / "file").write_text("")
+    assert stress.main([str(tmp_path / "file"), "--size", "small"]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "not a folder" in err
