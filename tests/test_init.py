@@ -172,3 +172,12 @@ def test_cli_without_init_uses_auto_and_reports_it(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["init"]["kind"] == "auto" and summary["init"]["candidates"] >= 1
     assert "rule" in summary["init"] and summary["init"]["seconds"] > 0
+
+
+def test_eval_with_init_from_the_true_box(tmp_path, ti_arch):
+    from lss_kernels.apps.evaluate import run_eval
+    from lss_kernels.scenes import write_scene
+    write_scene(tmp_path / "data" / "a", "easy", seed=1)
+    rows = run_eval(tmp_path / "data", methods=("lss",), out=tmp_path / "out", arch="cpu",
+                    progress=False, init="gt-box")
+    assert rows[0]["occ_f1"] > 0.8

@@ -170,6 +170,7 @@ def _check_result(r, d_max=D_MAX, bound_by_d_max=True):
     assert r.iterations == len(r.history) >= 1 and r.stop_reason
 
 
+@pytest.mark.slow
 @settings(deadline=None, max_examples=4, derandomize=True,
           suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow])
@@ -189,6 +190,7 @@ def test_solver_on_random_small_scenes(ti_arch, seed, d_fg, noise, shift, scale,
 
 
 # ------------------------------------------------------------------------------ degenerate
+@pytest.mark.slow
 def test_textureless_images_finish_with_a_reason(ti_arch, tmp_path, capsys):
     """Through the CLI: the reason is in summary.json."""
     gray = np.full((H, W, 3), 128, np.uint8)
@@ -206,6 +208,7 @@ def test_textureless_images_finish_with_a_reason(ti_arch, tmp_path, capsys):
     assert np.isfinite(read_pfm(out / "disparity.pfm")).all()
 
 
+@pytest.mark.slow
 def test_identical_images_finish_with_a_reason(ti_arch):
     scene = make_scene("tiny", seed=4)
     r = solve(scene.left, scene.left, D_MAX, scene.init_ellipse,
@@ -215,6 +218,7 @@ def test_identical_images_finish_with_a_reason(ti_arch):
     assert r.stop_reason.startswith("foreground vanished at iteration")
 
 
+@pytest.mark.slow
 def test_d_max_below_the_true_disparity(ti_arch):
     scene = make_scene("tiny", seed=5, d_fg=20.0, d_bg=4.0)
     r = solve(scene.left, scene.right, D_MAX, scene.init_ellipse,
@@ -224,6 +228,7 @@ def test_d_max_below_the_true_disparity(ti_arch):
                                      "reached the iteration cap"))
 
 
+@pytest.mark.slow
 def test_foreground_that_fills_the_image(ti_arch):
     scene = make_scene("tiny", seed=6)
     r = solve(scene.left, scene.right, D_MAX, (32.0, 24.0, 60.0, 50.0),
@@ -232,6 +237,7 @@ def test_foreground_that_fills_the_image(ti_arch):
     assert r.stop_reason == "foreground filled the image at iteration 1"
 
 
+@pytest.mark.slow
 def test_disparity_stays_within_the_search_range(ti_arch):
     """An initial ellipse in the background corner of the tiny scene: the 'foreground' takes
     the background's 4 px plane and Theta_bg becomes a steep quadratic; D and the left-view

@@ -54,6 +54,7 @@ def test_stepping_gives_the_same_result_as_solve(easy):
     np.testing.assert_array_equal(stepped.phi, result.phi)
 
 
+@pytest.mark.slow
 def test_reset_solves_another_pair_exactly_like_a_new_solver(ti_arch):
     a, b = make_scene("tiny", seed=0), make_scene("tiny", seed=1)
     params = Params(max_iterations=25)
@@ -142,6 +143,7 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     solver.close()
 
 
+@pytest.mark.slow
 def test_shape_weights_drop_consensus_that_points_outside_the_other_image(ti_arch):
     """Eq. 8 weights: precision^2 on the foreground / visible background, but zero where the
     consensus correspondence x +- c leaves the image (costs there compare clamped borders)."""
@@ -177,6 +179,7 @@ def test_shape_weights_drop_consensus_that_points_outside_the_other_image(ti_arc
     solver.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("patience", [1, 3])
 def test_stopping_rule_waits_for_patience_quiet_windows(ti_arch, patience):
     scene = make_scene("easy")

@@ -52,6 +52,7 @@ def test_replay_variants_and_the_end_of_the_record():
         replay([], P)
 
 
+@pytest.mark.slow
 def test_replay_of_a_solver_history_gives_its_stop(ti_arch):
     from lss_kernels.scenes import make_scene
     from lss_kernels.solver import Solver

@@ -71,16 +71,30 @@ def _run_on_worker(task, methods, arch: str, threads_by_host: dict) -> dict:
 _SOLVER = {}
 
 
-def _solve(scene: io.Scene, params, trace: bool = False, restart: bool = False):
+def scene_start(scene: io.Scene, init=None):
+    """``(init, frame)`` for a scene: its own ellipse (or ``auto`` without one) when ``init``
+    is None; ``"auto"``; ``"gt-point"`` / ``"gt-box"``: a point at the centroid / the bounding
+    box of the ground-truth foreground (a click, a detector), to measure those starts."""
+    from ..model.init import Box, Point
+    from .jobs import scene_init
+    if init in ("gt-point", "gt-box"):
+        if scene.fg_left is None or not scene.fg_left.any():
+            raise ValueError(f"--init {init}: scene {scene.name} has no fg_left.png")
+        ys, xs = np.nonzero(scene.fg_left)
+        if init == "gt-point":
+            return Point(float(xs.mean()), float(ys.mean())), "left"
+        return Box(float(xs.min()), float(ys.min()), float(xs.max()) + 1.0,
+                   float(ys.max()) + 1.0), "left"
+    return scene_init(scene, init)
+
+
+def _solve(scene: io.Scene, params, trace: bool = False, restart: bool = False, init=None):
     """Solve a scene with this process's solver; with ``trace``, also score the left view
     at the end of every stop window and at the last iteration; with ``restart``, start
     Taichi again before building a new solver (see :func:`lss_kernels.kernels.backend.restart`).
     Returns the result, the trace rows and the seconds spent scoring them."""
     from ..solver import Solver
-    if scene.init_ellipse_cyclopean is not None:
-        init, frame = tuple(scene.init_ellipse_cyclopean), "cyclopean"
-    else:
-        init, frame = tuple(scene.init_ellipse), "left"
+    init, frame = scene_start(scene, init)
     key = (scene.left.shape[:2], c_max(scene.d_max), params)
     solver = _SOLVER.get(key)
     if solver is None:
@@ -129,11 +143,11 @@ def _solver_key(task):
 
 
 def _run_method(method: str, scene: io.Scene, params, trace: bool = False,
-                restart: bool = False):
+                restart: bool = False, init=None):
     """Disparity and occlusion (left view) of one method on one scene, extra facts, and the
     seconds spent on the trace."""
     if method == "lss":
-        result, rows, spent = _solve(scene, params, trace, restart)
+        result, rows, spent = _solve(scene, params, trace, restart, init)
         extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason)}
         if trace:
             extra["trace"] = rows
@@ -143,12 +157,13 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False,
 
 
 def _run_one(scene_dir: str, method: str, run_dir: str, params, trace: bool = False,
-             restart: bool = False) -> dict:
+             restart: bool = False, init=None) -> dict:
     """Run, score and save one (scene, method); return the record written to result.json
     (``seconds`` leaves out the scoring of a trace)."""
     scene = io.load_scene(scene_dir)
     start = time.perf_counter()
-    disparity, occlusion, extra, spent = _run_method(method, scene, params, trace, restart)
+    disparity, occlusion, extra, spent = _run_method(method, scene, params, trace, restart,
+                                                     init)
     seconds = time.perf_counter() - start - spent
     disparity = np.asarray(disparity, dtype=np.float32)
     occlusion = np.asarray(occlusion, dtype=bool)
@@ -191,7 +206,7 @@ def _check_methods(methods) -> tuple:
 def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs: int = 1,
              force: bool = False, arch: str = "cpu", params=None,
              progress: bool = True, trace: bool = False,
-             restart_taichi: bool = False, scheduler: str | None = None) -> list:
+             restart_taichi: bool = False, scheduler: str | None = None, init=None) -> list:
     """Run ``methods`` on every scene of ``dataset_dir``, score them and write the report.
 
     Parameters
@@ -229,6 +244,8 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
         processes (``jobs > 1`` or ``scheduler``) always do.
     scheduler : str or None
         Address of a running Dask scheduler: run there instead (``jobs`` is then unused).
+    init : {None, "auto", "gt-point", "gt-box"}
+        How ``lss`` starts (:func:`scene_start`); None: each scene's own ellipse.
 
     Returns
     -------
@@ -269,7 +286,7 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
                                                    "skipped": True}
             else:
                 todo.append((os.fspath(scene_dir), method, os.fspath(run_dir), params,
-                             trace and method == "lss", restart_taichi or remote))
+                             trace and method == "lss", restart_taichi or remote, init))
 
     total = len(names) * len(methods)
     log = _Progress(total, enabled=progress)
@@ -380,6 +397,10 @@ def add_cli(subparsers) -> None:
     p.add_argument("--trace", action="store_true",
                    help="score lss at the end of every stop window; writes convergence.csv, "
                         ".md (with variants of the stopping rule replayed) and .png")
+    p.add_argument("--init", choices=("auto", "gt-point", "gt-box"),
+                   help="start lss from auto, or from a point at the centroid / the bounding "
+                        "box of the true foreground, instead of each scene's ellipse (use its "
+                        "own --out)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=main_eval)
 
@@ -391,7 +412,8 @@ def main_eval(args) -> int:
     try:
         rows = run_eval(args.dataset_dir, methods=methods, out=args.out, jobs=args.jobs,
                         force=args.force, arch=args.arch, progress=not args.quiet,
-                        trace=args.trace, restart_taichi=True, scheduler=args.scheduler)
+                        trace=args.trace, restart_taichi=True, scheduler=args.scheduler,
+                        init=args.init)
     except (ValueError, FileNotFoundError, ImportError) as error:
         print(f"lss eval: error: {error}", file=sys.stderr)
         return 2

@@ -8,9 +8,9 @@ per cyclopean pixel with its precision.  Then, per pixel, in kernels:
 * ``Point(x, y)``: the object under the pixel is the 4-connected region grown from it over
   pixels whose d-bar differs from the seed's by at most ``tolerance`` and from a neighbour's
   by at most ``step`` (a depth-coherent flood fill).
-* ``Box(x0, y0, x1, y1)``: the object inside the box: the ellipse inscribed in it, widened by
-  ``BOX_SPILL`` (a start that spills over the object is recovered by the evolution, one that
-  covers only part of it is not).
+* ``Box(x0, y0, x1, y1)``: the object inside the box: the ellipse inscribed in it
+  (``BOX_SPILL``; on the paper's scenes with the true boxes, mean F1 0.739 at 1.0 against
+  0.658 with the radii widened to 1.15).
 * ``"auto"``: the *near* pixels are those whose d-bar stands above the background on both
   sides along the epipolar line (the row): ``d - max(min over [x-L, x-1], min over
   [x+1, x+L]) > contrast``; their 4-connected components are the candidates, and the one
@@ -18,8 +18,9 @@ per cyclopean pixel with its precision.  Then, per pixel, in kernels:
   centre, as a fraction of the half-diagonal) is the object: the largest near region closest
   to the centre.
 
-A region found by a point or ``auto`` starts phi as the ellipse with the region's bounding
-box, widened like a box.  Every choice is reported in :attr:`InitialRegion.info`.
+A region found by a point or ``auto`` starts phi as the ellipse of the region's bounding
+box widened by ``REGION_SPILL`` (a start that spills over the object is recovered by the
+evolution, one that covers only part of it is not).  Every choice is reported in :attr:`InitialRegion.info`.
 """
 from dataclasses import dataclass
 import math
@@ -27,10 +28,11 @@ import math
 import numpy as np
 import taichi as ti
 
-__all__ = ["Point", "Box", "AUTO", "InitialRegion", "InitError", "BOX_SPILL"]
+__all__ = ["Point", "Box", "AUTO", "InitialRegion", "InitError", "BOX_SPILL", "REGION_SPILL"]
 
 AUTO = "auto"
-BOX_SPILL = 1.15         # the ellipse's radii over the box's half sides
+BOX_SPILL = 1.0          # a box's ellipse radii over the box's half sides
+REGION_SPILL = 1.15      # a found region's ellipse radii over its bounding box's half sides
 CONTRAST = 1.5           # near-pixel contrast (auto), cyclopean pixels
 WINDOW = 0.5             # row window L of the contrast (auto), fraction of the width
 MIN_AREA = 0.005         # smallest candidate region, fraction of the image
@@ -90,8 +92,8 @@ def pick_region(labels: np.ndarray, min_area: int):
     return labels == ids[best], facts
 
 
-def mask_ellipse(mask: np.ndarray, spill: float = BOX_SPILL) -> tuple:
-    """The ellipse of the bounding box of ``mask``, widened like a box's."""
+def mask_ellipse(mask: np.ndarray, spill: float = REGION_SPILL) -> tuple:
+    """The ellipse of the bounding box of ``mask``, radii widened by ``spill``."""
     ys, xs = np.nonzero(mask)
     return box_ellipse(Box(float(xs.min()), float(ys.min()), float(xs.max()) + 1.0,
                            float(ys.max()) + 1.0), spill)
