@@ -193,7 +193,8 @@ class Solver:
         first consensus."""
         H, W = self.H, self.W
         self.init_info = {"kind": "mask" if isinstance(init, np.ndarray) else "ellipse"}
-        if not isinstance(init, (np.ndarray, tuple)):
+        found = not isinstance(init, (np.ndarray, tuple))
+        if found:
             t0 = time.perf_counter()
             self._first_consensus()
             init, init_frame = self.initialiser.find(init, self.hierarchy.consensus_mean,
@@ -205,17 +206,19 @@ class Solver:
             cx, cy, rx, ry = (float(v) for v in init)
             y, x = np.mgrid[0:H, 0:W].astype(np.float64)
             region = lambda shift: ((x - cx - shift) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0
-        shift = self._foreground_shift(region(0.0))
+        shift = self._foreground_shift(region(0.0), consensus_ready=found)
         if init_frame == "left":
             self.initial_left = region(0.0)
             return region(-shift)
         self.initial_left = region(shift)
         return region(0.0)
 
-    def _foreground_shift(self, left_mask):
+    def _foreground_shift(self, left_mask, consensus_ready=False):
         """Half the foreground's left-view disparity: the median first consensus mean over
-        the initial region (read as if the frames coincided)."""
-        self._first_consensus()
+        the initial region (read as if the frames coincided); ``consensus_ready``: the first
+        consensus is already in the hierarchy's fields."""
+        if not consensus_ready:
+            self._first_consensus()
         mean = self.hierarchy.consensus_mean.to_numpy()
         prec = self.hierarchy.precision.to_numpy()
         sel = left_mask & (prec > 0)

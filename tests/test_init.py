@@ -181,3 +181,15 @@ def test_eval_with_init_from_the_true_box(tmp_path, ti_arch):
     rows = run_eval(tmp_path / "data", methods=("lss",), out=tmp_path / "out", arch="cpu",
                     progress=False, init="gt-box")
     assert rows[0]["occ_f1"] > 0.8
+
+
+def test_pick_region_prefers_a_large_region_near_the_centre():
+    from lss_kernels.model.init import pick_region
+    labels = np.full((40, 60), -1)
+    labels[15:25, 25:35] = 7          # 100 px at the centre
+    labels[0:12, 0:12] = 3            # 144 px in a corner: r ~ 0.77, score 0
+    labels[30:32, 50:52] = 9          # 4 px: below the minimum area
+    mask, facts = pick_region(labels, min_area=10)
+    assert mask.sum() == 100 and mask[20, 30]
+    assert facts["candidates"] == 2 and facts["centroid"] == [29.5, 19.5]
+    assert pick_region(np.full((5, 5), -1), 1) == (None, {"candidates": 0})

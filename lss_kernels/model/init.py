@@ -71,21 +71,17 @@ def pick_region(labels: np.ndarray, min_area: int):
     """The candidate of ``labels`` (``-1`` = none) with the largest
     ``area * (1 - 1.5 r)^2``; returns ``(mask, facts)`` or ``(None, facts)``."""
     H, W = labels.shape
-    ids, first, area = np.unique(labels[labels >= 0], return_index=True, return_counts=True)
-    keep = area >= min_area
-    ids, area = ids[keep], area[keep]
-    if ids.size == 0:
-        return None, {"candidates": 0}
     ys, xs = np.nonzero(labels >= 0)
-    lab = labels[ys, xs]
-    order = np.searchsorted(ids, lab)
-    ok = (order < ids.size) & (ids[np.minimum(order, ids.size - 1)] == lab)
-    cy = np.bincount(order[ok], weights=ys[ok], minlength=ids.size) / area
-    cx = np.bincount(order[ok], weights=xs[ok], minlength=ids.size) / area
+    ids, inverse, area = np.unique(labels[ys, xs], return_inverse=True, return_counts=True)
+    large = area >= min_area
+    if not large.any():
+        return None, {"candidates": 0}
+    cy = np.bincount(inverse, weights=ys) / area
+    cx = np.bincount(inverse, weights=xs) / area
     r = np.hypot(cx - (W - 1) / 2.0, cy - (H - 1) / 2.0) / math.hypot(W / 2.0, H / 2.0)
-    score = area * np.clip(1.0 - 1.5 * r, 0.0, None) ** 2
+    score = np.where(large, area * np.clip(1.0 - 1.5 * r, 0.0, None) ** 2, -1.0)
     best = int(np.argmax(score))
-    facts = {"candidates": int(ids.size), "area": int(area[best]),
+    facts = {"candidates": int(large.sum()), "area": int(area[best]),
              "centroid": [float(cx[best]), float(cy[best])], "score": float(score[best]),
              "rule": "largest area * (1 - 1.5 r)^2, r = distance from the image centre / "
                      "half-diagonal"}
