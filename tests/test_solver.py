@@ -120,12 +120,13 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     # the three row-filtered scratch planes of the separable filters carry half-width
     # margin rows above and below; they, phi's four derivative planes and the message
     # caches are lane planes, whose rows are padded to whole blocks of lanes
-    half, padded = solver.levelset.half, solver.levelset.blocks * solver.levelset.lanes
+    half, padded = solver.levelset.filters.half, solver.levelset.blocks * solver.levelset.lanes
     filter_margins = 3 * 2 * half * padded * 4 + (7 + 5 * levels) * H * (padded - W) * 4
     # the median's sorted columns (k per pixel) and its output plane are stored in blocks
     # of lanes rows, over whole tiles of columns; the sorted columns also hold k // 2
     # reflected columns on either side
-    k, tile, ls = solver.params.median_size, solver.levelset._network[1], solver.levelset
+    k, ls = solver.params.median_size, solver.levelset.median
+    tile = ls._network[1]
     rows = -(-H // ls.lanes) * ls.lanes
     columns = tile * -(-W // tile)
     planes += H * W * 4
