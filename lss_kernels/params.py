@@ -97,6 +97,16 @@ class Params:
         (within half a step).  False: the integer argmin of the authors' release (left-view
         disparities quantised to even values, which biases Theta by a fraction of a pixel
         and pulls the boundary inwards).
+    refine : bool
+        Refine each layer's disparity by a residual from its own matches
+        (:mod:`lss_kernels.model.refine`, surface plus parallax); False keeps the paper's
+        two quadratics (``Result.surface`` holds them either way).
+    refine_passes : tuple of (range, window, smoothing)
+        Per refinement pass: the candidate half-range around the layer's surface, the
+        half-side of the layer-restricted matching window and of the residual's averaging
+        box (left-view pixels).
+    refine_ratio : float
+        Peak-ratio threshold of a distinct match in the refinement (in (0, 1]).
     """
 
     dt: float = 0.2
@@ -125,6 +135,9 @@ class Params:
     matching_cost: str = "ad"
     exclusive_fit: bool = False
     subpixel_messages: bool = True
+    refine: bool = True
+    refine_passes: tuple = ((24, 9, 8), (4, 4, 2))
+    refine_ratio: float = 0.9
 
     def __post_init__(self):
         self.validate()
@@ -175,6 +188,14 @@ class Params:
         if not isinstance(self.subpixel_messages, bool):
             raise ValueError(f"params.subpixel_messages: expected True or False, got "
                              f"{self.subpixel_messages!r}")
+        if not isinstance(self.refine, bool):
+            raise ValueError(f"params.refine: expected True or False, got {self.refine!r}")
+        need("refine_passes", lambda v: isinstance(v, tuple) and len(v) >= 1 and all(
+            isinstance(p, tuple) and len(p) == 3 and all(
+                isinstance(k, int) and not isinstance(k, bool) and 1 <= k <= 64 for k in p)
+            for p in v), "a tuple of (range, window, smoothing) triples of integers in "
+            "[1, 64]")
+        need("refine_ratio", lambda v: finite(v) and 0 < v <= 1, "a number in (0, 1]")
 
     def replace(self, **changes) -> "Params":
         """A copy with some fields changed (validated)."""
@@ -186,4 +207,5 @@ class Params:
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
         d["patch_sizes"] = list(self.patch_sizes)
+        d["refine_passes"] = [list(p) for p in self.refine_passes]
         return d

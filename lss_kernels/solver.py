@@ -33,6 +33,7 @@ from .model.levelset import LevelSet
 from .model.matching import MatchingCost
 from .model.messages import Messages
 from .model.occlusion import OcclusionGeometry
+from .model.refine import LayerRefinement
 from .params import Params, c_max
 from .model.shapes import GlobalShapes
 from .stopping import StopRule
@@ -45,8 +46,11 @@ class Result:
     """Output of :func:`solve`.
 
     Left view (the user's frame, Middlebury convention): ``disparity`` ``(H, W)`` float32 in
-    left-view pixels (finite, clamped to ``[0, d_max]``), ``occlusion`` (seen by the left camera, hidden from
-    the right) and ``foreground`` boolean ``(H, W)``.
+    left-view pixels (finite, clamped to ``[0, d_max]``): each layer's surface refined by its
+    own matches (surface plus parallax, :mod:`lss_kernels.model.refine`; the surface itself
+    with ``Params(refine=False)``); ``surface``: the two quadratics' disparity (the paper's
+    model); ``occlusion`` (seen by the left camera, hidden from the right) and
+    ``foreground`` boolean ``(H, W)``.
 
     Cyclopean frame (the model's): ``phi`` ``(H, W)`` (> 0 foreground), ``consensus_mean`` and
     ``consensus_sigma`` ``(H, W)`` in left-view disparity units (sigma = d_max where no valid
@@ -57,6 +61,7 @@ class Result:
     """
 
     disparity: np.ndarray
+    surface: np.ndarray
     occlusion: np.ndarray
     foreground: np.ndarray
     phi: np.ndarray
@@ -68,8 +73,6 @@ class Result:
     stop_reason: str
     timings: dict = field(default_factory=dict)
     history: list = field(default_factory=list)
-
-
 
 
 @ti.data_oriented
@@ -132,6 +135,9 @@ class Solver:
         self.initialiser = InitialRegion(pool, H, W)
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, self.params)
+        self.refinement = (LayerRefinement(pool, H, W, self.params.refine_passes,
+                                           self.params.refine_ratio)
+                           if self.params.refine else None)
         pool.finalize()
         self.levelset.setup()
         self.costs.setup(self.levelset.distance, self.levelset.distance_map)
@@ -345,14 +351,24 @@ class Solver:
         return self.result()
 
     # ------------------------------------------------------------------ outputs
-    def left_view(self):
-        """Left-view ``(disparity, occlusion, foreground)`` of the current model."""
+    def left_view(self, refine=False):
+        """Left-view ``(disparity, occlusion, foreground)`` of the current model; with
+        ``refine``, the refined disparity (:mod:`lss_kernels.model.refine`; the disparity
+        itself without ``params.refine``) comes fourth."""
         self.occ.render_left(self.shapes, self.levelset.phi)
-        d = self.occ.disparity_left.to_numpy()
-        d = np.clip(np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0), 0.0, self.d_max)
-        return (d.astype(np.float32),
-                self.occ.occlusion_left.to_numpy().astype(bool),
-                self.occ.foreground_left.to_numpy().astype(bool))
+        clean = lambda d: np.clip(np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0), 0.0,
+                                  self.d_max).astype(np.float32)
+        out = (clean(self.occ.disparity_left.to_numpy()),
+               self.occ.occlusion_left.to_numpy().astype(bool),
+               self.occ.foreground_left.to_numpy().astype(bool))
+        if not refine or self.refinement is None:
+            return out + (out[0],) if refine else out
+        t0 = time.perf_counter()
+        self.refinement.run(self.left, self.right, self.occ.disparity_left,
+                            self.occ.foreground_left, self.occ.occlusion_left, self.d_max)
+        ti.sync()
+        self.timings["refine"] = time.perf_counter() - t0
+        return out + (clean(self.refinement.disparity.to_numpy()),)
 
     def consensus(self):
         """Consensus mean and sigma, cyclopean frame, left-view disparity units."""
@@ -403,13 +419,15 @@ class Solver:
 
     def result(self):
         """The current model as a :class:`Result`."""
-        disparity, occlusion, foreground = self.left_view()
+        surface, occlusion, foreground, disparity = self.left_view(refine=True)
         mean, sigma = self.consensus()
         th = self.shapes.pixel_coefficients(2.0)
         timings = dict(self.timings)
         timings["iterations_total"] = self._t_loop
-        timings["total"] = self.timings["setup_total"] + self._t_loop
-        return Result(disparity=disparity, occlusion=occlusion, foreground=foreground,
+        timings["total"] = (self.timings["setup_total"] + self._t_loop
+                            + self.timings.get("refine", 0.0))
+        return Result(disparity=disparity, surface=surface, occlusion=occlusion,
+                      foreground=foreground,
                       phi=self.levelset.phi.to_numpy(), theta_fg=th[0], theta_bg=th[1],
                       consensus_mean=mean, consensus_sigma=sigma, iterations=self.iteration,
                       stop_reason=self.stop_reason or "not finished", timings=timings,

@@ -22,7 +22,7 @@ from lss_kernels.scenes import write_scene  # noqa: E402
 SCENES = ("s0", "s1", "s2")
 ITERATIONS = 5
 FAST = Params(max_iterations=ITERATIONS)
-FILES = {"disparity.pfm", "occlusion.png", "foreground.png", "disparity.png", "overlay.png",
+FILES = {"disparity.pfm", "surface.pfm", "occlusion.png", "foreground.png", "disparity.png", "overlay.png",
          "summary.json"}
 MAPS = ("disparity.pfm", "occlusion.png", "foreground.png")
 

@@ -54,6 +54,9 @@ def _add_solve(subparsers):
     p.add_argument("--max-iterations", type=int, metavar="N", help="iteration cap")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="override a solver parameter (repeatable), e.g. --param mu=3")
+    p.add_argument("--no-refine", action="store_true",
+                   help="disparity.pfm keeps the two quadratics (the paper's model) instead "
+                        "of refining each layer by its own matches")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=main_solve)
 
@@ -70,7 +73,9 @@ def _params(args):
         current = getattr(defaults, name)
         try:
             if isinstance(current, tuple):
-                changes[name] = tuple(int(v) for v in value.split(","))
+                # "3,9,18"; nested tuples as "24:9:8,4:4:2"
+                changes[name] = tuple(tuple(int(k) for k in v.split(":")) if ":" in v
+                                      else int(v) for v in value.split(","))
             elif isinstance(current, bool):
                 if value.lower() not in ("true", "false", "1", "0"):
                     raise ValueError(value)
@@ -86,6 +91,8 @@ def _params(args):
                            f"got {value!r}") from None
     if args.max_iterations is not None:
         changes["max_iterations"] = args.max_iterations
+    if getattr(args, "no_refine", False):
+        changes["refine"] = False
     return defaults.replace(**changes) if changes else defaults
 
 

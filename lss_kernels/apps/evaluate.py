@@ -148,7 +148,9 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False,
     seconds spent on the trace."""
     if method == "lss":
         result, rows, spent = _solve(scene, params, trace, restart, init)
-        extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason)}
+        extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason),
+                 "bad4_surface": float(metrics.score(result.surface, result.occlusion,
+                                                     scene)["bad4"])}
         if trace:
             extra["trace"] = rows
         return result.disparity, result.occlusion, extra, spent

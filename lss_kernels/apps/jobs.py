@@ -140,6 +140,8 @@ def run_job(job, out_dir, params, cache=None, callback=None, extra=None):
         from ..metrics import score
         info["score"] = {k: (float(v) if hasattr(v, "__float__") else v)
                          for k, v in score(result.disparity, result.occlusion, job.scene).items()}
+        info["score"]["bad4_surface"] = float(
+            score(result.surface, result.occlusion, job.scene)["bad4"])
     info.update(extra or {})
     return write_outputs(out_dir, result, left, params, info, initial)
 
@@ -166,6 +168,7 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None):
     tmp = tempfile.mkdtemp(prefix=".lss-", dir=parent)
     try:
         io.write_pfm(os.path.join(tmp, "disparity.pfm"), result.disparity)
+        io.write_pfm(os.path.join(tmp, "surface.pfm"), result.surface)
         io.write_mask(os.path.join(tmp, "occlusion.png"), result.occlusion)
         io.write_mask(os.path.join(tmp, "foreground.png"), result.foreground)
         viz.save_disparity_png(os.path.join(tmp, "disparity.png"), result.disparity,
@@ -179,6 +182,10 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None):
                        theta_bg=np.round(result.theta_bg, 10).tolist(),
                        theta_basis="left-view disparity over {x^2, xy, y^2, x, y, 1}, raw "
                                    "cyclopean pixel coordinates",
+                       refinement=dict(enabled=params.refine,
+                                       passes=[list(p) for p in params.refine_passes],
+                                       ratio=params.refine_ratio,
+                                       seconds=round(result.timings.get("refine", 0.0), 4)),
                        params=params.to_dict())
         summary.update(extra or {})
         with open(os.path.join(tmp, "summary.json"), "w") as f:

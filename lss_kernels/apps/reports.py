@@ -16,14 +16,17 @@ __all__ = ["COLUMNS", "MEAN_KEYS", "RULE_VARIANTS", "means", "write_convergence"
            "write_panel", "write_table"]
 
 #: Columns of ``results.csv``.
-COLUMNS = ("scene", "method", "occ_f1", "occ_precision", "occ_recall", "bad4", "seconds")
+#: ``bad4_surface``: bad-4.0 of the two quadratics before the refinement (lss; NaN for the
+#: peers, which have no surface model).
+COLUMNS = ("scene", "method", "occ_f1", "occ_precision", "occ_recall", "bad4", "bad4_surface",
+           "seconds")
 #: The columns averaged per method.
-MEAN_KEYS = ("occ_f1", "occ_precision", "occ_recall", "bad4", "seconds")
+MEAN_KEYS = ("occ_f1", "occ_precision", "occ_recall", "bad4", "bad4_surface", "seconds")
 
 
 def means(rows, method: str) -> dict:
     mine = [r for r in rows if r["method"] == method]
-    return {k: float(np.mean([r[k] for r in mine])) for k in MEAN_KEYS}
+    return {k: float(np.mean([r.get(k, np.nan) for r in mine])) for k in MEAN_KEYS}
 
 
 def write_csv(path: Path, rows, methods) -> None:
@@ -33,7 +36,7 @@ def write_csv(path: Path, rows, methods) -> None:
         writer.writerow(COLUMNS)
         for row in rows:
             writer.writerow([row["scene"], row["method"]]
-                            + [f"{row[k]:.6g}" for k in COLUMNS[2:]])
+                            + [f"{row.get(k, np.nan):.6g}" for k in COLUMNS[2:]])
         for method in methods:
             mean = means(rows, method)
             writer.writerow(["mean", method] + [f"{mean[k]:.6g}" for k in COLUMNS[2:]])
@@ -53,7 +56,7 @@ def write_table(path: Path, rows, names, methods, dataset_dir: Path) -> None:
         meta = json.loads(meta_file.read_text()) if meta_file.exists() else {}
         numbers[name] = meta.get("paper_scene")
     by_key = {(r["scene"], r["method"]): r for r in rows}
-    fmt = lambda v, spec: "–" if v is None else format(v, spec)
+    fmt = lambda v, spec: "–" if v is None or v != v else format(v, spec)
 
     def paper_f1(key, name):
         n = numbers[name]
@@ -78,6 +81,9 @@ def write_table(path: Path, rows, names, methods, dataset_dir: Path) -> None:
     lines.append("| **mean bad-4.0 (%)** | " + " | ".join(
         [fmt(by_method[m]["bad4"], ".2f") for m in methods]
         + [fmt(paper[k].get("avg_bad4"), ".2f") for k in paper]) + " |")
+    lines.append("| **mean bad-4.0, two quadratics (%)** | " + " | ".join(
+        [fmt(by_method[m]["bad4_surface"], ".2f") for m in methods] + ["–"] * len(paper))
+        + " |")
     lines.append("| **seconds per scene** | " + " | ".join(
         [fmt(by_method[m]["seconds"], ".2f") for m in methods] + ["–"] * len(paper)) + " |")
     text = [f"# Occlusion F1 on {dataset_dir.name} ({len(names)} scenes)", ""] + lines

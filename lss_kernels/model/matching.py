@@ -70,7 +70,11 @@ class MatchingCost:
             for dy, dx in ti.static(ti.ndrange((-_RADIUS, _RADIUS + 1),
                                                (-_RADIUS, _RADIUS + 1))):
                 if ti.static(dy != 0 or dx != 0):
-                    if self._grey(img, y + dy, x + dx) < centre:
+                    # a neighbour clamped onto the centre is the centre: never below it
+                    # (its grey, computed apart, may differ from ``centre`` in the last bit)
+                    ny = ti.min(ti.max(y + dy, 0), self.H - 1)
+                    nx = ti.min(ti.max(x + dx, 0), self.W - 1)
+                    if (ny != y or nx != x) and self._grey(img, ny, nx) < centre:
                         words[bit // 32] |= ti.u32(1) << ti.u32(bit % 32)
                     bit += 1
             out[y, x] = words

@@ -1,0 +1,264 @@
+"""Surface plus parallax inside each layer: the left-view disparity of Sec. 4's two quadratics
+refined by a residual that each layer estimates from its own pixels.
+
+The paper (Sec. 4, Sec. 6) notes that one quadratic per layer cannot describe every object or
+background, and points to a surface-plus-parallax model.  Here each layer's disparity is its
+rendered surface S (the z-buffered ``2 Theta_j`` of :mod:`lss_kernels.model.occlusion`) plus
+a smooth residual r, found after the alternation (the occlusion geometry, delta_theta, keeps
+the quadratics):
+
+1. a plane sweep in the left view: for every integer disparity d, the AD-Census matching
+   cost of :mod:`lss_kernels.model.matching` (left pixel x against right pixel x - d) is
+   averaged over a ``(2 window + 1)^2`` box **restricted to the pixel's own layer** (a
+   foreground pixel averages foreground pixels only, so a window never straddles the
+   boundary), and stored for the candidates ``round(S) - range .. round(S) + range``;
+2. per pixel, the best candidate, refined to the vertex of the parabola through it and its
+   two neighbours, is kept as a match when it is distinct (its cost below ``ratio`` times
+   that of the best candidate that is not its neighbour: the peak-ratio test, which rejects
+   flat and periodic cost curves) and not at the edge of the range; occluded pixels (seen by
+   one camera only) and candidates whose right pixel leaves the image are no evidence;
+3. the residual of the matches, ``match - S``, is averaged over a box of ``smoothing``
+   pixels (plus a twentieth of a box four times wider, which fills larger holes) restricted
+   to the layer, and added to S.
+
+The result of a pass is the surface of the next: a wide first pass follows a layer far from
+its quadratic, a narrow second one settles the detail.  Box sums run as prefix sums along
+rows, then columns: a few operations per pixel whatever the window.
+"""
+import taichi as ti
+
+from .matching import MatchingCost
+
+__all__ = ["LayerRefinement", "NO_COST"]
+
+#: Cost stored for a candidate that has none (right pixel outside the image, or outside the
+#: candidate range of the pixel).
+NO_COST = 1e9
+#: Weight of the wide box in the residual's average (pass smoothing times four).
+WIDE_WEIGHT = 0.05
+
+
+@ti.data_oriented
+class LayerRefinement:
+    """Owns the plane sweep's cost store and the residual's planes for ``(H, W)`` images.
+
+    Parameters
+    ----------
+    pool : FieldPool
+    height, width : int
+    passes : tuple of ``(range, window, smoothing)``
+        Candidate half-range around the surface (left-view pixels), the half-side of the
+        layer-restricted matching window and of the residual's box, per pass.
+    ratio : float
+        Peak-ratio threshold of a distinct match (in (0, 1]).
+    """
+
+    def __init__(self, pool, height, width, passes, ratio):
+        self.H, self.W = int(height), int(width)
+        self.passes = tuple(tuple(int(v) for v in p) for p in passes)
+        self.ratio = float(ratio)
+        self.K = 2 * max(p[0] for p in self.passes) + 1
+        shape = (self.H, self.W)
+        self.matching = MatchingCost(pool, self.H, self.W, "ad_census")
+        self.label = pool.field(ti.i32, shape)          # 0 foreground, 1 background
+        self.visible = pool.field(ti.i32, shape)        # seen by both cameras
+        self.surface = pool.field(ti.f32, shape)
+        self.base = pool.field(ti.i32, shape)
+        self.span = pool.field(ti.i32, (2,))             # the lowest and highest base
+        self.costs = pool.field(ti.f32, (self.H, self.W, self.K))
+        self.residual = pool.field(ti.f32, shape)
+        self.weight = pool.field(ti.f32, shape)
+        self.disparity = pool.field(ti.f32, shape)
+        # box sums of a 4-channel source: a value and its weight per layer,
+        # (value fg, value bg, weight fg, weight bg); its prefix sums; its box; the
+        # residual's average (the sums of both boxes)
+        self.source = pool.vector(4, ti.f32, shape)
+        self.prefix = pool.vector(4, ti.f32, shape)
+        self.columns = pool.vector(4, ti.f32, shape)
+        self.box = pool.vector(4, ti.f32, shape)
+        self.average = pool.vector(4, ti.f32, shape)
+
+    # ------------------------------------------------------------------ box sums
+    @ti.kernel
+    def _row_prefix(self):
+        """``prefix``: the prefix sums of ``source`` along each row."""
+        for y in range(self.H):
+            s = ti.Vector([0.0, 0.0, 0.0, 0.0])
+            for x in range(self.W):
+                s += self.source[y, x]
+                self.prefix[y, x] = s
+
+    @ti.kernel
+    def _column_prefix(self, r: ti.i32):
+        """``columns``: the prefix sums down each column of the row boxes (half-width r,
+        clamped to the image) that ``prefix`` gives."""
+        for x in range(self.W):
+            s = ti.Vector([0.0, 0.0, 0.0, 0.0])
+            for y in range(self.H):
+                v = self.prefix[y, ti.min(x + r, self.W - 1)]
+                if x - r - 1 >= 0:
+                    v -= self.prefix[y, x - r - 1]
+                s += v
+                self.columns[y, x] = s
+
+    @ti.func
+    def _box(self, y, x, r):
+        """The box of half-width r around (y, x), clamped to the image, from ``columns``."""
+        v = self.columns[ti.min(y + r, self.H - 1), x]
+        if y - r - 1 >= 0:
+            v -= self.columns[y - r - 1, x]
+        return v
+
+    @ti.kernel
+    def _column_box(self, r: ti.i32):
+        for y, x in self.box:
+            self.box[y, x] = self._box(y, x, r)
+
+    def box_sum(self, r):
+        """``box`` = the sums of ``source`` over the in-image pixels of the
+        ``(2 r + 1)^2`` window around each pixel."""
+        self._row_prefix()
+        self._column_prefix(r)
+        self._column_box(r)
+
+    # ------------------------------------------------------------------ the passes
+    @ti.kernel
+    def _load(self, surface: ti.template(), foreground: ti.template(),
+              occlusion: ti.template()):
+        for y, x in self.surface:
+            self.surface[y, x] = surface[y, x]
+            self.label[y, x] = 1 - foreground[y, x]
+            self.visible[y, x] = 1 - occlusion[y, x]
+
+    @ti.kernel
+    def _start_pass(self, R: ti.i32):
+        """Candidate centres and their span; no costs yet."""
+        self.span[0] = 1 << 30
+        self.span[1] = -(1 << 30)
+        for y, x in self.surface:
+            b = ti.cast(ti.round(self.surface[y, x]), ti.i32)
+            self.base[y, x] = b
+            ti.atomic_min(self.span[0], b)
+            ti.atomic_max(self.span[1], b)
+            for k in range(2 * R + 1):
+                self.costs[y, x, k] = NO_COST
+
+    @ti.func
+    def _match(self, left: ti.template(), right: ti.template(), y, x, d):
+        """The box's source at disparity d: the matching cost and a weight of 1 in the
+        pixel's layer's channels, for pixels whose right pixel x - d is in the image."""
+        c = 0.0
+        inside = x - d >= 0
+        if inside:
+            c = self.matching.cost(left, right, y, x, x - d)
+        fg = inside & (self.label[y, x] == 0)
+        bg = inside & (self.label[y, x] == 1)
+        return ti.Vector([ti.select(fg, c, 0.0), ti.select(bg, c, 0.0),
+                          ti.select(fg, 1.0, 0.0), ti.select(bg, 1.0, 0.0)])
+
+    @ti.kernel
+    def _match_rows(self, left: ti.template(), right: ti.template(), d: ti.i32):
+        """Row prefix sums of the matching source at disparity d."""
+        for y in range(self.H):
+            s = ti.Vector([0.0, 0.0, 0.0, 0.0])
+            for x in range(self.W):
+                s += self._match(left, right, y, x, d)
+                self.prefix[y, x] = s
+
+    @ti.kernel
+    def _store(self, d: ti.i32, R: ti.i32, r: ti.i32):
+        """The layer-restricted window mean (the box of half-width r) at disparity d, for
+        the pixels whose candidate range holds d and whose right pixel is in the image."""
+        for y, x in self.base:
+            k = d - self.base[y, x] + R
+            if 0 <= k <= 2 * R and x - d >= 0:
+                lab = self.label[y, x]
+                box = self._box(y, x, r)
+                n = box[2 + lab]
+                if n > 0:
+                    self.costs[y, x, k] = box[lab] / n
+
+    @ti.kernel
+    def _select(self, R: ti.i32, ratio: ti.f32):
+        """Per pixel: the distinct, interior best candidate (peak ratio), refined to the
+        parabola's vertex; its residual against the surface and its weight (1 or 0)."""
+        for y, x in self.surface:
+            best = NO_COST
+            kb = -1
+            for k in range(2 * R + 1):
+                c = self.costs[y, x, k]
+                if c < best:
+                    best = c
+                    kb = k
+            second = NO_COST
+            for k in range(2 * R + 1):
+                if ti.abs(k - kb) >= 2:
+                    second = ti.min(second, self.costs[y, x, k])
+            w = 0.0
+            r = 0.0
+            if 0 < kb < 2 * R and self.visible[y, x] == 1:
+                cm = self.costs[y, x, kb - 1]
+                cp = self.costs[y, x, kb + 1]
+                if cm < NO_COST and cp < NO_COST and best < ratio * second:
+                    den = cm - 2.0 * best + cp
+                    sub = 0.0
+                    if den > 0:
+                        sub = 0.5 * (cm - cp) / den
+                    r = ti.cast(self.base[y, x] + kb - R, ti.f32) + sub - self.surface[y, x]
+                    w = 1.0
+            self.residual[y, x] = r
+            self.weight[y, x] = w
+
+    @ti.kernel
+    def _residual_source(self):
+        for y, x in self.source:
+            w = self.weight[y, x]
+            fg = self.label[y, x] == 0
+            v = w * self.residual[y, x]
+            self.source[y, x] = ti.Vector([ti.select(fg, v, 0.0), ti.select(fg, 0.0, v),
+                                           ti.select(fg, w, 0.0), ti.select(fg, 0.0, w)])
+
+    @ti.kernel
+    def _accumulate(self, weight: ti.f32):
+        """``average = box`` for weight 1, ``average += weight * box`` otherwise."""
+        for y, x in self.average:
+            self.average[y, x] = weight * self.box[y, x] + \
+                ti.select(weight < 1.0, self.average[y, x], 0.0)
+
+    @ti.kernel
+    def _apply(self, d_max: ti.f32):
+        for y, x in self.surface:
+            lab = self.label[y, x]
+            den = self.average[y, x][2 + lab]
+            s = self.surface[y, x]
+            if den > 0:
+                s += self.average[y, x][lab] / den
+            s = ti.min(ti.max(s, 0.0), d_max)
+            self.disparity[y, x] = s
+            self.surface[y, x] = s
+
+    def _smooth(self, r):
+        """``average``: the layer-restricted box sums of the weighted residual and of the
+        weights, over the ``r`` box plus ``WIDE_WEIGHT`` times the ``4 r`` box."""
+        self._residual_source()
+        self.box_sum(r)
+        self._accumulate(1.0)
+        self.box_sum(4 * r)
+        self._accumulate(WIDE_WEIGHT)
+
+    def run(self, left, right, surface, foreground, occlusion, d_max):
+        """Refine the left-view ``surface`` (f32 plane) of the layers ``foreground`` (i32, 1
+        on the foreground) with ``occlusion`` (i32, 1 where the right camera cannot see);
+        ``left``, ``right``: RGB vector fields in [0, 1].  The result is in ``disparity``."""
+        self.matching.setup(left, right)
+        self._load(surface, foreground, occlusion)
+        for R, window, smoothing in self.passes:
+            self._start_pass(R)
+            low, high = (int(v) for v in self.span.to_numpy())
+            for d in range(max(low - R, 0), min(high + R, int(d_max)) + 1):
+                self._match_rows(left, right, d)
+                self._column_prefix(window)
+                self._store(d, R, window)
+            self._select(R, self.ratio)
+            self._smooth(smoothing)
+            self._apply(float(d_max))
