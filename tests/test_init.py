@@ -101,15 +101,80 @@ def test_each_kind_finds_the_rendered_object(easy, kind):
     assert _iou(result.foreground, scene.fg_left) >= 0.9
 
 
-def test_auto_on_a_slanted_scene(ti_arch):
+@pytest.fixture(scope="module")
+def slanted(ti_arch):
     from lss_kernels.scenes import make_scene
-    from lss_kernels.solver import Solver
+    from lss_kernels.solver import Params, Solver
     scene = make_scene("slanted", seed=2)
-    solver = Solver(scene.left, scene.right, scene.d_max, "auto")
-    try:
-        assert _iou(solver.initial_foreground_left(), scene.fg_left) >= 0.5
-    finally:
-        solver.close()
+    solver = Solver(scene.left, scene.right, scene.d_max, "auto",
+                    params=Params(max_iterations=1))
+    yield scene, solver
+    solver.close()
+
+
+@pytest.mark.parametrize("kind", ["auto", "point", "box"])
+def test_each_kind_starts_on_the_slanted_object(slanted, kind):
+    scene, solver = slanted
+    solver.reset(scene.left, scene.right, scene.d_max, _inits(scene)[kind])
+    assert _iou(solver.initial_foreground_left(), scene.fg_left) >= 0.5
+    assert solver.init_info["kind"] == kind
+
+
+def _median_spec(d, k=7):
+    """The k x k median with symmetric borders (the spec of ``InitialRegion.smooth``)."""
+    padded = np.pad(d, k // 2, mode="symmetric")
+    return np.median(np.lib.stride_tricks.sliding_window_view(padded, (k, k)), axis=(2, 3))
+
+
+def test_smoothing_is_the_7x7_median(region):
+    d = _quantised_depths(5)
+    region.d.from_numpy(d)
+    region.smooth()
+    np.testing.assert_array_equal(region.d.to_numpy(), _median_spec(d))
+
+
+def _square_any(mask, radius):
+    """Whether any pixel of ``mask`` lies in each pixel's (2 radius + 1) square."""
+    padded = np.pad(mask, radius, constant_values=False)
+    k = 2 * radius + 1
+    return np.lib.stride_tricks.sliding_window_view(padded, (k, k)).any(axis=(2, 3))
+
+
+@pytest.mark.parametrize("radius", [1, 3])
+def test_opening_and_widening_match_the_specification(region, radius):
+    rng = np.random.default_rng(radius)
+    near = rng.random((24, 40)) < 0.7
+    near[5:15, 10:30] = True
+    region.label.from_numpy(np.where(near, 0, -1).astype(np.int32))
+    region.erode(radius)
+    eroded = ~_square_any(~near, radius)          # the image's outside does not erode
+    np.testing.assert_array_equal(region.inside.to_numpy() == 1, eroded)
+    region.dilate(radius)
+    labels = region.label.to_numpy()
+    np.testing.assert_array_equal(labels >= 0, _square_any(eroded, radius))
+    own = np.arange(24 * 40).reshape(24, 40)
+    assert (labels[labels >= 0] == own[labels >= 0]).all()
+
+
+def test_a_point_grows_over_near_pixels_only(region):
+    """Seed on a near block standing on a ramp at the block's depth: the region stays on the
+    block (the band alone would run along the ramp)."""
+    d = np.tile(np.linspace(2.0, 12.0, 24, dtype=np.float32)[:, None], (1, 40))
+    d[4:14, 14:26] = 7.0                         # a block at the ramp's depth at row ~11
+    region.d.from_numpy(d)
+    region.mark_near(20, 1.0)
+    region.keep_near()
+    near = region.label.to_numpy() >= 0
+    assert near[4:8, 14:26].all() and not near[10:].any()
+    region.keep_near()
+    region.seed(5, 20)
+    region.until_stable(lambda: region.grow(7.0, 1.0, 1.0))
+    got = region.label.to_numpy() == 1
+    np.testing.assert_array_equal(got, near)
+    region.d.from_numpy(d)                       # over every pixel: it runs along the ramp
+    region.seed(5, 20)
+    region.until_stable(lambda: region.grow(7.0, 1.0, 1.0))
+    assert (region.label.to_numpy()[10:14] == 1).all()
 
 
 def test_parse_init_kinds():
