@@ -368,7 +368,7 @@ class Solver:
                             self.occ.foreground_left, self.occ.occlusion_left, self.d_max)
         ti.sync()
         self.timings["refine"] = time.perf_counter() - t0
-        return out + (clean(self.refinement.disparity.to_numpy()),)
+        return out + (clean(self.refinement.surface.to_numpy()),)
 
     def consensus(self):
         """Consensus mean and sigma, cyclopean frame, left-view disparity units."""

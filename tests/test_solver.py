@@ -140,9 +140,9 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     chunk = (min(CHUNK, solver.c_max) + 1) * H * W * 4
     longest = max(H, W, solver.c_max)
     lines = 3 * 4 * (max(H, W) * (max(H, W) + 1) + 2 * (4 * H * W + 2 * longest))
-    # the refinement (model/refine.py): its cost store (2 range + 1 planes), 7 planes, five
+    # the refinement (model/refine.py): its cost store (2 range + 1 planes), 6 planes, five
     # 4-channel box planes, the census words of both views (2 + 2) and the candidates' span
-    refine = (solver.refinement.K + 7 + 5 * 4 + 4) * H * W * 4 + 8
+    refine = (solver.refinement.K + 6 + 5 * 4 + 4) * H * W * 4 + 8
     assert solver.memory_bytes <= (budget + margins + planes + filter_margins + chunk + lines
                                    + refine)
     solver.close()

@@ -68,7 +68,6 @@ class LayerRefinement:
         self.costs = pool.field(ti.f32, (self.H, self.W, self.K))
         self.residual = pool.field(ti.f32, shape)
         self.weight = pool.field(ti.f32, shape)
-        self.disparity = pool.field(ti.f32, shape)
         # box sums of a 4-channel source: a value and its weight per layer,
         # (value fg, value bg, weight fg, weight bg); its prefix sums; its box; the
         # residual's average (the sums of both boxes)
@@ -233,9 +232,7 @@ class LayerRefinement:
             s = self.surface[y, x]
             if den > 0:
                 s += self.average[y, x][lab] / den
-            s = ti.min(ti.max(s, 0.0), d_max)
-            self.disparity[y, x] = s
-            self.surface[y, x] = s
+            self.surface[y, x] = ti.min(ti.max(s, 0.0), d_max)
 
     def _smooth(self, r):
         """``average``: the layer-restricted box sums of the weighted residual and of the
@@ -249,7 +246,8 @@ class LayerRefinement:
     def run(self, left, right, surface, foreground, occlusion, d_max):
         """Refine the left-view ``surface`` (f32 plane) of the layers ``foreground`` (i32, 1
         on the foreground) with ``occlusion`` (i32, 1 where the right camera cannot see);
-        ``left``, ``right``: RGB vector fields in [0, 1].  The result is in ``disparity``."""
+        ``left``, ``right``: RGB vector fields in [0, 1].  The refined map is left in
+        ``surface``."""
         self.matching.setup(left, right)
         self._load(surface, foreground, occlusion)
         for R, window, smoothing in self.passes:
