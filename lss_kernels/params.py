@@ -107,6 +107,11 @@ class Params:
         box (left-view pixels).
     refine_ratio : float
         Peak-ratio threshold of a distinct match in the refinement (in (0, 1]).
+    recover : bool
+        A model that collapsed (no foreground, no disparity jump, or the foreground behind
+        the background) is solved again with the AD-Census cost and the sounder model kept
+        (:mod:`lss_kernels.recovery`; :func:`~lss_kernels.solve`, ``lss solve``, ``lss
+        batch`` and ``lss eval``; a bare ``Solver.run`` does not).
     """
 
     dt: float = 0.2
@@ -138,6 +143,7 @@ class Params:
     refine: bool = True
     refine_passes: tuple = ((24, 9, 8), (4, 4, 2))
     refine_ratio: float = 0.9
+    recover: bool = True
 
     def __post_init__(self):
         self.validate()
@@ -196,6 +202,8 @@ class Params:
             for p in v), "a tuple of (range, window, smoothing) triples of integers in "
             "[1, 64]")
         need("refine_ratio", lambda v: finite(v) and 0 < v <= 1, "a number in (0, 1]")
+        if not isinstance(self.recover, bool):
+            raise ValueError(f"params.recover: expected True or False, got {self.recover!r}")
 
     def replace(self, **changes) -> "Params":
         """A copy with some fields changed (validated)."""

@@ -28,7 +28,7 @@ from .kernels.backend import FieldPool
 from .model import STAGES
 from .model.costs import BoundaryCosts
 from .model.hierarchy import PatchHierarchy
-from .model.init import InitialRegion
+from .model.init import InitialRegion, shift_columns
 from .model.levelset import LevelSet
 from .model.matching import MatchingCost
 from .model.messages import Messages
@@ -57,7 +57,8 @@ class Result:
     patch covers the pixel).  ``theta_fg``, ``theta_bg``: coefficients of the left-view
     disparity (2 Theta_j) over the basis {x^2, xy, y^2, x, y, 1} of raw cyclopean pixel
     coordinates.  ``iterations`` run, ``stop_reason``, ``timings`` (seconds per stage) and
-    ``history`` (per-iteration statistics).
+    ``history`` (per-iteration statistics); ``recovery``: whether the model collapsed and
+    was solved again (:mod:`lss_kernels.recovery`; set by :func:`solve`, not by ``run``).
     """
 
     disparity: np.ndarray
@@ -73,6 +74,7 @@ class Result:
     stop_reason: str
     timings: dict = field(default_factory=dict)
     history: list = field(default_factory=list)
+    recovery: dict = field(default_factory=dict)
 
 
 @ti.data_oriented
@@ -207,7 +209,7 @@ class Solver:
                                                      self.hierarchy.precision)
             self.init_info = dict(self.initialiser.info, seconds=time.perf_counter() - t0)
         if isinstance(init, np.ndarray):
-            region = lambda shift: _shift_columns(init, shift)
+            region = lambda shift: shift_columns(init, shift)
         else:
             cx, cy, rx, ry = (float(v) for v in init)
             y, x = np.mgrid[0:H, 0:W].astype(np.float64)
@@ -449,17 +451,6 @@ class Solver:
         return self.pool.nbytes + self.levelset.scratch_bytes + self.costs.scratch_bytes
 
 
-def _shift_columns(mask, shift):
-    """A boolean mask moved right by ``round(shift)`` columns (left if negative)."""
-    k = int(round(shift))
-    out = np.zeros_like(mask, dtype=bool)
-    if k >= 0:
-        out[:, k:] = mask[:, :mask.shape[1] - k]
-    else:
-        out[:, :k] = mask[:, -k:]
-    return out
-
-
 def solve(left, right, d_max, init, params=None, arch=None, callback=None, init_frame="left",
           profile=False):
     """Solve a rectified pair with the two-layer level-set model (the whole paper).
@@ -491,9 +482,13 @@ def solve(left, right, d_max, init, params=None, arch=None, callback=None, init_
     ----------
     J. Wang and T. Zickler, "Level Set Stereo for Cooperative Grouping with Occlusion".
     """
-    solver = Solver(left, right, d_max, init, params=params, arch=arch, init_frame=init_frame,
-                    profile=profile)
-    try:
-        return solver.run(callback)
-    finally:
-        solver.close()
+    from .recovery import with_recovery
+
+    def run(p):
+        solver = Solver(left, right, d_max, init, params=p, arch=arch, init_frame=init_frame,
+                        profile=profile)
+        try:
+            return solver.run(callback), None
+        finally:
+            solver.close()
+    return with_recovery(run, params if params is not None else Params())[0]

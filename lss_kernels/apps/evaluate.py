@@ -147,8 +147,14 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False,
     """Disparity and occlusion (left view) of one method on one scene, extra facts, and the
     seconds spent on the trace."""
     if method == "lss":
-        result, rows, spent = _solve(scene, params, trace, restart, init)
+        from ..recovery import with_recovery
+
+        def run(p):
+            result, rows, spent = _solve(scene, p, trace, restart, init)
+            return result, (rows, spent)
+        result, (rows, spent) = with_recovery(run, params)
         extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason),
+                 "recovered": result.recovery.get("kept") == "retry",
                  "bad4_surface": float(metrics.score(result.surface, result.occlusion,
                                                      scene)["bad4"])}
         if trace:

@@ -94,6 +94,18 @@ class SolverCache:
         self.restart_taichi = restart_taichi
 
     def solve(self, job, params, callback=None):
+        """Solve ``job`` (solved again when the model collapses, :mod:`lss_kernels.recovery`);
+        returns ``(result, facts)``: the left image, the initial foreground (left view) and
+        the initialisation's report of the run kept."""
+        from ..recovery import with_recovery
+
+        def run(p):
+            result, solver = self._run(job, p, callback)
+            return result, (solver.left_image, solver.initial_foreground_left(),
+                            solver.init_info)
+        return with_recovery(run, params)
+
+    def _run(self, job, params, callback=None):
         """Solve ``job`` with a reused or new solver; returns ``(result, solver)``."""
         from ..params import c_max
         from ..solver import Solver
@@ -128,14 +140,13 @@ def run_job(job, out_dir, params, cache=None, callback=None, extra=None):
     cache = SolverCache() if own else cache
     start = time.perf_counter()
     try:
-        result, solver = cache.solve(job, params, callback)
-        left, initial = solver.left_image, solver.initial_foreground_left()
+        result, (left, initial, init_info) = cache.solve(job, params, callback)
     finally:
         if own:
             cache.close()
     info = {"name": job.name, "wall_seconds": round(time.perf_counter() - start, 3),
             "d_max": float(job.d_max), "arch": backend.current_arch(),
-            "init": _jsonable(solver.init_info)}
+            "init": _jsonable(init_info), "recovery": _jsonable(result.recovery)}
     if job.scene is not None:
         from ..metrics import score
         info["score"] = {k: (float(v) if hasattr(v, "__float__") else v)

@@ -36,7 +36,7 @@ import taichi as ti
 
 from ..kernels.median import Assign, MedianFilter
 
-__all__ = ["Point", "Box", "AUTO", "InitialRegion", "InitError", "BOX_SPILL"]
+__all__ = ["Point", "Box", "AUTO", "InitialRegion", "InitError", "BOX_SPILL", "shift_columns"]
 
 AUTO = "auto"
 BOX_SPILL = 1.0          # a box's ellipse radii over the box's half sides
@@ -97,6 +97,18 @@ def pick_region(labels: np.ndarray, min_area: int):
              "rule": "largest area * (1 - 1.5 r)^2, r = distance from the image centre / "
                      "half-diagonal"}
     return labels == ids[best], facts
+
+
+def shift_columns(mask: np.ndarray, shift: float) -> np.ndarray:
+    """A boolean mask moved right by ``round(shift)`` columns (left if negative): an initial
+    region from one frame to the other (x_left = x_c + c)."""
+    k = int(round(shift))
+    out = np.zeros_like(mask, dtype=bool)
+    if k >= 0:
+        out[:, k:] = mask[:, :mask.shape[1] - k]
+    else:
+        out[:, :k] = mask[:, -k:]
+    return out
 
 
 @ti.data_oriented

@@ -1,0 +1,85 @@
+"""A collapsed solve is recognised from its own model and solved again with the census cost.
+
+On weak, dark or periodic textures the paper's absolute-difference cost (Sec. 4) can lead
+the alternation to a model that explains nothing: the foreground vanishes or fills the image,
+or the two surfaces coincide or cross, so that no disparity jump and no occlusion remain
+(Sec. 2: the occluded extent *is* the jump).  Such a model is recognised without ground
+truth:
+
+- the foreground (phi > 0) is empty or the whole image;
+- the mean jump ``2 (Theta_1 - Theta_2)`` over the foreground is below ``MIN_JUMP``
+  left-view pixels;
+- the foreground surface lies at or behind the background on more than ``MAX_CROSSING`` of
+  the foreground (the "foreground" is not in front).
+
+The pair is then solved again with ``matching_cost = RECOVERY_COST`` (AD-Census, which
+matches dark and low-contrast texture by the order of grey values), and the second model
+is kept only when it is sound and has a larger jump and less crossing than the first;
+otherwise the first stays.  ``Result.recovery`` records what happened.
+"""
+import numpy as np
+
+__all__ = ["MAX_CROSSING", "MIN_JUMP", "RECOVERY_COST", "collapse", "model_health",
+           "with_recovery"]
+
+#: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
+MIN_JUMP = 1.0
+#: Largest fraction of the foreground where Theta_1 <= Theta_2 in a sound model.
+MAX_CROSSING = 0.5
+#: The matching cost of the second solve.
+RECOVERY_COST = "ad_census"
+
+
+def model_health(result) -> dict:
+    """``area`` (foreground fraction, cyclopean), ``jump`` (mean left-view jump over the
+    foreground) and ``crossing`` (fraction of the foreground where Theta_1 <= Theta_2)."""
+    fg = np.asarray(result.phi) > 0
+    H, W = fg.shape
+    if not fg.any():
+        return {"area": 0.0, "jump": 0.0, "crossing": 1.0}
+    y, x = np.nonzero(fg)
+    x, y = x.astype(np.float64), y.astype(np.float64)
+    basis = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=-1)
+    jump = basis @ (np.asarray(result.theta_fg, np.float64)
+                    - np.asarray(result.theta_bg, np.float64))
+    return {"area": float(fg.mean()), "jump": float(jump.mean()),
+            "crossing": float((jump <= 0).mean())}
+
+
+def collapse(health: dict):
+    """Why a model (:func:`model_health`) has collapsed, or None when it is sound."""
+    if health["area"] == 0.0:
+        return "the foreground vanished"
+    if health["area"] == 1.0:
+        return "the foreground filled the image"
+    if health["jump"] < MIN_JUMP:
+        return (f"the surfaces coincide: mean jump {health['jump']:.2f} px over the "
+                f"foreground (< {MIN_JUMP})")
+    if health["crossing"] > MAX_CROSSING:
+        return (f"the foreground lies behind the background on {health['crossing']:.0%} "
+                f"of it (> {MAX_CROSSING:.0%})")
+    return None
+
+
+def with_recovery(run, params):
+    """``run(params) -> (result, extra)`` once, and again with ``RECOVERY_COST`` when the
+    first model collapsed (and ``params.recover``); returns the ``(result, extra)`` kept,
+    with ``result.recovery`` set."""
+    result, extra = run(params)
+    first = model_health(result)
+    reason = collapse(first)
+    record = {"health": first, "collapse": reason, "retried": False}
+    if reason is None or not params.recover or params.matching_cost == RECOVERY_COST:
+        result.recovery = record
+        return result, extra
+    second_result, second_extra = run(params.replace(matching_cost=RECOVERY_COST))
+    second = model_health(second_result)
+    kept = (collapse(second) is None and second["jump"] > first["jump"]
+            and second["crossing"] <= first["crossing"])
+    record.update(retried=True, matching_cost=RECOVERY_COST, retry_health=second,
+                  retry_collapse=collapse(second), kept="retry" if kept else "first")
+    if kept:
+        second_result.recovery = record
+        return second_result, second_extra
+    result.recovery = record
+    return result, extra

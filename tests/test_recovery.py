@@ -1,0 +1,99 @@
+"""Collapse of a model recognised without ground truth, and the second solve with AD-Census."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from lss_kernels import Params, recovery
+from lss_kernels.recovery import collapse, model_health, with_recovery
+
+H, W = 20, 30
+
+
+def model(jump=10.0, slope=0.0, region=(slice(5, 15), slice(10, 20))):
+    """A Result-like model: phi > 0 on ``region``; Theta_2 = 20, Theta_1 = 20 + jump +
+    slope * x (left-view disparity over {x^2, xy, y^2, x, y, 1})."""
+    phi = -np.ones((H, W))
+    if region is not None:
+        phi[region] = 1.0
+    return SimpleNamespace(phi=phi, theta_fg=np.array([0, 0, 0, slope, 0, 20.0 + jump]),
+                           theta_bg=np.array([0, 0, 0, 0, 0, 20.0]), recovery={})
+
+
+def test_a_sound_model_has_a_jump_in_front():
+    health = model_health(model(jump=10.0))
+    assert health == {"area": 100 / (H * W), "jump": pytest.approx(10.0), "crossing": 0.0}
+    assert collapse(health) is None
+
+
+def test_each_kind_of_collapse_is_named():
+    assert collapse(model_health(model(region=None))) == "the foreground vanished"
+    full = model(region=(slice(None), slice(None)))
+    assert collapse(model_health(full)) == "the foreground filled the image"
+    assert "mean jump 0.30 px" in collapse(model_health(model(jump=0.3)))
+    # Theta_1 - Theta_2 = x - 10: behind on columns 0..5, 15..19 px in front on 25..29
+    split = model(jump=-10.0, slope=1.0, region=(slice(5, 15), np.r_[0:6, 25:30]))
+    health = model_health(split)
+    assert health["jump"] == pytest.approx(40 / 11) and health["crossing"] == pytest.approx(6 / 11)
+    assert "behind the background on 55%" in collapse(health)
+
+
+def runs(*models):
+    """A run function that returns the given models in turn and records the params."""
+    calls = []
+
+    def run(params):
+        calls.append(params)
+        return models[len(calls) - 1], len(calls)
+    return run, calls
+
+
+def test_a_collapsed_model_is_solved_again_with_census_and_the_sound_one_kept():
+    run, calls = runs(model(jump=0.1), model(jump=12.0))
+    result, extra = with_recovery(run, Params())
+    assert [p.matching_cost for p in calls] == ["ad", recovery.RECOVERY_COST]
+    assert extra == 2 and result.recovery["kept"] == "retry"
+    assert result.recovery["retry_health"]["jump"] == pytest.approx(12.0)
+    assert "mean jump 0.10" in result.recovery["collapse"]
+
+
+def test_a_retry_that_is_no_sounder_is_dropped():
+    first = model(jump=0.5)
+    run, calls = runs(first, model(jump=0.2))
+    result, extra = with_recovery(run, Params())
+    assert result is first and extra == 1 and result.recovery["kept"] == "first"
+    assert result.recovery["retry_collapse"] is not None
+
+
+@pytest.mark.parametrize("params, first_jump", [
+    (Params(), 10.0),                              # a sound model
+    (Params(recover=False), 0.0),                  # collapsed, recovery switched off
+    (Params(matching_cost="ad_census"), 0.0),      # collapsed, census already
+])
+def test_no_second_solve_without_need_or_leave(params, first_jump):
+    run, calls = runs(model(jump=first_jump), model(jump=12.0))
+    result, _ = with_recovery(run, params)
+    assert len(calls) == 1 and result.recovery["retried"] is False
+    assert (result.recovery["collapse"] is None) == (first_jump > 1.0)
+
+
+def test_params_recover_is_validated():
+    with pytest.raises(ValueError, match="params.recover"):
+        Params(recover="yes")
+
+
+@pytest.mark.slow
+def test_a_dark_weak_background_is_recovered(ti_arch, tmp_path):
+    """The stress set's dark, weakly textured background: AD lets the two surfaces
+    coincide; solve() recognises it and the census solve finds the occlusion."""
+    from lss_kernels import solve, stress
+    from lss_kernels.io import load_scene
+    from lss_kernels.metrics import score
+    from lss_kernels.scenes import write_scene
+    name, keywords = next(s for s in stress.stress_specs(seed=0, size="small")
+                          if s[0] == "weak_bg_dark")
+    write_scene(tmp_path / name, None, name=name, **keywords)
+    scene = load_scene(tmp_path / name)
+    result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse)
+    assert result.recovery["retried"], result.recovery
+    assert score(result.disparity, result.occlusion, scene)["occ_f1"] > 0.9
