@@ -64,7 +64,9 @@ def collapse(health: dict):
 def with_recovery(run, params):
     """``run(params) -> (result, extra)`` once, and again with ``RECOVERY_COST`` when the
     first model collapsed (and ``params.recover``); returns the ``(result, extra)`` kept,
-    with ``result.recovery`` set."""
+    with ``result.recovery`` set.  ``params`` None: the defaults."""
+    from .params import Params
+    params = Params() if params is None else params
     result, extra = run(params)
     first = model_health(result)
     reason = collapse(first)

@@ -57,6 +57,13 @@ def test_a_collapsed_model_is_solved_again_with_census_and_the_sound_one_kept():
     assert "mean jump 0.10" in result.recovery["collapse"]
 
 
+def test_no_params_means_the_defaults():
+    run, calls = runs(model(jump=0.0), model(jump=12.0))
+    result, _ = with_recovery(run, None)
+    assert calls == [Params(), Params(matching_cost=recovery.RECOVERY_COST)]
+    assert result.recovery["kept"] == "retry"
+
+
 def test_a_retry_that_is_no_sounder_is_dropped():
     first = model(jump=0.5)
     run, calls = runs(first, model(jump=0.2))
