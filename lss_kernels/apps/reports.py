@@ -143,7 +143,9 @@ def write_convergence(out: Path, records, params, missing=()) -> None:
              f"The runs used stop_fraction {params.stop_fraction}, min_iterations "
              f"{params.min_iterations}, stop_window {params.stop_window}, stop_patience "
              f"{params.stop_patience}. A variant can only be replayed up to where the run "
-             "stopped: *ended* counts the runs whose record ended before the variant fired.",
+             "stopped: *ended* counts the runs whose record ended before the variant fired. "
+             "bad-4.0 here is that of the two quadratics (the trace scores the model during "
+             "the iterations, before the refinement).",
              "", "| stop_fraction | min_iterations | median iterations | total iterations | "
              "mean F1 | mean bad-4.0 (%) | ended |", "|---|---|---|---|---|---|---|"]
     for f_scale, m_scale in RULE_VARIANTS:
