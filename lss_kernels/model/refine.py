@@ -68,9 +68,9 @@ class LayerRefinement:
         self.costs = pool.field(ti.f32, (self.H, self.W, self.K))
         self.residual = pool.field(ti.f32, shape)
         self.weight = pool.field(ti.f32, shape)
-        # box sums of a 4-channel source: a value and its weight per layer,
-        # (value fg, value bg, weight fg, weight bg); its prefix sums; its box; the
-        # residual's average (the sums of both boxes)
+        # box sums of a 4-channel source, a value and its weight per layer (value fg,
+        # value bg, weight fg, weight bg): its row prefix sums, the column prefix sums of
+        # their row boxes, the box, and the residual's average (the sums of both boxes)
         self.source = pool.vector(4, ti.f32, shape)
         self.prefix = pool.vector(4, ti.f32, shape)
         self.columns = pool.vector(4, ti.f32, shape)
