@@ -21,7 +21,7 @@ __all__ = [
     "patch_messages", "consensus", "median_filter", "convolve", "gaussian_derivatives",
     "curvature", "interp_row", "interp_volume", "shape_value", "basis", "fit_shape",
     "delta_theta", "boundary_weight", "levelset_step", "squared_distance", "reinitialise",
-    "disparity", "near_pixels", "grow_region", "left_cost", "refine_layers",
+    "disparity", "near_pixels", "dilate", "grow_region", "left_cost", "refine_layers",
 ]
 
 
@@ -374,6 +374,14 @@ def near_pixels(d, window, contrast):
                 ground = max(lo) if len(lo) == 2 else lo[0]
                 near[y, x] = d[y, x] - ground > contrast
     return near
+
+
+def dilate(mask, radius):
+    """Whether any pixel of ``mask`` lies in each pixel's ``2 radius + 1`` square (the
+    image's outside is empty); ``~dilate(~mask, r)`` is the erosion."""
+    k = 2 * radius + 1
+    padded = np.pad(np.asarray(mask, bool), radius, constant_values=False)
+    return sliding_window_view(padded, (k, k)).any(axis=(2, 3))
 
 
 def grow_region(d, seed, seed_d, tolerance, step):
