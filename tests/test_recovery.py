@@ -104,3 +104,22 @@ def test_a_dark_weak_background_is_recovered(ti_arch, tmp_path):
     result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse)
     assert result.recovery["retried"], result.recovery
     assert score(result.disparity, result.occlusion, scene)["occ_f1"] > 0.9
+
+
+@pytest.mark.slow
+def test_lss_solve_says_it_recovered(ti_arch, tmp_path, capsys):
+    import json
+    from lss_kernels import stress
+    from lss_kernels.apps.cli import main
+    from lss_kernels.scenes import write_scene
+    name, keywords = next(s for s in stress.stress_specs(seed=0, size="small")
+                          if s[0] == "weak_bg_dark")
+    write_scene(tmp_path / name, None, name=name, **keywords)
+    out = tmp_path / "out"
+    assert main(["solve", "--scene", str(tmp_path / name), "--out", str(out), "--arch",
+                 ti_arch]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["recovery"].get("kept") == "retry", summary["recovery"]
+    assert "the first model collapsed" in printed and "kept the second model" in printed
+    assert summary["score"]["occ_f1"] > 0.9

@@ -166,6 +166,11 @@ def main_solve(args):
             line += (f"  occlusion F1 {summary['score']['occ_f1']:.3f}, "
                      f"bad-4.0 {summary['score']['bad4']:.2f}%")
         print(line)
+        recovery = summary.get("recovery", {})
+        if recovery.get("retried"):
+            print(f"lss solve: the first model collapsed ({recovery['collapse']}); solved "
+                  f"again with {recovery['matching_cost']}, kept the "
+                  f"{'second' if recovery['kept'] == 'retry' else 'first'} model")
     return 0
 
 
