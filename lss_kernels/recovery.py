@@ -19,6 +19,8 @@ otherwise the first stays.  ``Result.recovery`` records what happened.
 """
 import numpy as np
 
+from .model.init import InitError
+
 __all__ = ["MAX_CROSSING", "MIN_JUMP", "RECOVERY_COST", "collapse", "model_health",
            "with_recovery"]
 
@@ -74,11 +76,17 @@ def with_recovery(run, params):
     if reason is None or not params.recover or params.matching_cost == RECOVERY_COST:
         result.recovery = record
         return result, extra
-    second_result, second_extra = run(params.replace(matching_cost=RECOVERY_COST))
+    record.update(retried=True, matching_cost=RECOVERY_COST)
+    try:
+        second_result, second_extra = run(params.replace(matching_cost=RECOVERY_COST))
+    except InitError as error:         # e.g. auto finds no object in the census consensus
+        record.update(retry_error=str(error), kept="first")
+        result.recovery = record
+        return result, extra
     second = model_health(second_result)
     kept = (collapse(second) is None and second["jump"] > first["jump"]
             and second["crossing"] <= first["crossing"])
-    record.update(retried=True, matching_cost=RECOVERY_COST, retry_health=second,
+    record.update(retry_health=second,
                   retry_collapse=collapse(second), kept="retry" if kept else "first")
     if kept:
         second_result.recovery = record

@@ -64,6 +64,21 @@ def test_no_params_means_the_defaults():
     assert result.recovery["kept"] == "retry"
 
 
+def test_a_retry_that_finds_no_start_keeps_the_first():
+    from lss_kernels.model.init import InitError
+    first = model(jump=0.0)
+    calls = []
+
+    def run(params):
+        calls.append(params)
+        if len(calls) == 2:
+            raise InitError("init auto: no foreground found")
+        return first, 1
+    result, extra = with_recovery(run, Params())
+    assert result is first and result.recovery["kept"] == "first"
+    assert "no foreground found" in result.recovery["retry_error"]
+
+
 def test_a_retry_that_is_no_sounder_is_dropped():
     first = model(jump=0.5)
     run, calls = runs(first, model(jump=0.2))
