@@ -107,6 +107,10 @@ class Params:
         box (left-view pixels).
     refine_ratio : float
         Peak-ratio threshold of a distinct match in the refinement (in (0, 1]).
+    message_ambiguity : float
+        0: a patch's message weighs 1 / sigma_p^2 (Eq. 5).  > 0: also times its cost
+        curve's distinctness ``clip((1 - r) / message_ambiguity, 0, 1)``, ``r`` the peak
+        ratio of the second-deepest minimum (:class:`~lss_kernels.model.messages.Messages`).
     recover : bool
         A model that collapsed (no foreground, no disparity jump, or the foreground behind
         the background) is solved again with the AD-Census cost and the sounder model kept
@@ -143,6 +147,7 @@ class Params:
     refine: bool = True
     refine_passes: tuple = ((24, 9, 8), (4, 4, 2))
     refine_ratio: float = 0.9
+    message_ambiguity: float = 0.0
     recover: bool = True
 
     def __post_init__(self):
@@ -202,6 +207,8 @@ class Params:
             for p in v), "a tuple of (range, window, smoothing) triples of integers in "
             "[1, 64]")
         need("refine_ratio", lambda v: finite(v) and 0 < v <= 1, "a number in (0, 1]")
+        need("message_ambiguity", lambda v: finite(v) and 0 <= v <= 1,
+             "a number in [0, 1] (0: off)")
         if not isinstance(self.recover, bool):
             raise ValueError(f"params.recover: expected True or False, got {self.recover!r}")
 

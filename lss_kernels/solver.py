@@ -131,7 +131,8 @@ class Solver:
         self.right = pool.vector(3, ti.f32, (H, W))
         self.matching = MatchingCost(pool, H, W, self.params.matching_cost)
         self.hierarchy = PatchHierarchy(pool, H, W, C, self.params.patch_sizes)
-        self.messages = Messages(self.hierarchy, self.params.subpixel_messages)
+        self.messages = Messages(self.hierarchy, self.params.subpixel_messages, pool,
+                                 self.params.message_ambiguity)
         self.costs = BoundaryCosts(pool, H, W, C)
         self.shapes = GlobalShapes(pool, H, W)
         self.initialiser = InitialRegion(pool, H, W)

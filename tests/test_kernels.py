@@ -323,6 +323,36 @@ def test_cached_candidates_are_dropped_when_the_costs_change(pair):
     pool.destroy()
 
 
+def test_distinctness_weights_match_the_specification(pair):
+    """``ambiguity > 0``: each patch's relay precision is 1 / sigma_p^2 times the
+    distinctness of its cost curve (the numpy specification), and 0 where the curve has a
+    second minimum as deep as the first."""
+    from lss_kernels.model.hierarchy import PatchHierarchy
+    from lss_kernels.kernels import lanes
+    pool = FieldPool()
+    h = PatchHierarchy(pool, H, W, C, SIZES)
+    matcher = MatchingCost(pool, H, W)
+    lf, rf = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
+    plain, weighted = Messages(h), Messages(h, pool=pool, ambiguity=0.3)
+    pool.finalize()
+    lf.from_numpy(pair[0])
+    rf.from_numpy(pair[1])
+    h.build_costs(matcher, lf, rf)
+    relays = []
+    for messages in (plain, weighted):
+        messages.run(0.0, False, False, keep=True)
+        relays.append([h.levels[i].image(h.levels[i].relay_a) for i in range(len(SIZES))])
+    for level in range(len(SIZES)):
+        cost = _inside(h, h.levels[level].cost, level)
+        want = ref.distinctness(cost, 0.3)
+        got = lanes.to_image(weighted.distinct[level], W)
+        np.testing.assert_allclose(got, want, atol=1e-4)
+        np.testing.assert_allclose(relays[1][level], relays[0][level] * want, rtol=1e-4,
+                                   atol=1e-12)
+        assert 0 < (want < 1).mean() < 1
+    pool.destroy()
+
+
 def test_integer_messages_without_subpixel_refinement(pair):
     """``subpixel=False`` is the release's integer argmin (Eq. 5 over c = 1 .. c_max)."""
     from lss_kernels.model.hierarchy import PatchHierarchy

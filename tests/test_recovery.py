@@ -1,4 +1,5 @@
-"""Collapse of a model recognised without ground truth, and the second solve with AD-Census."""
+"""Collapse of a model recognised without ground truth, and the second solve with AD-Census
+and distinctness-weighted messages."""
 from types import SimpleNamespace
 
 import numpy as np
@@ -51,7 +52,7 @@ def runs(*models):
 def test_a_collapsed_model_is_solved_again_with_census_and_the_sound_one_kept():
     run, calls = runs(model(jump=0.1), model(jump=12.0))
     result, extra = with_recovery(run, Params())
-    assert [p.matching_cost for p in calls] == ["ad", recovery.RECOVERY_COST]
+    assert calls == [Params(), Params().replace(**recovery.RECOVERY)]
     assert extra == 2 and result.recovery["kept"] == "retry"
     assert result.recovery["retry_health"]["jump"] == pytest.approx(12.0)
     assert "mean jump 0.10" in result.recovery["collapse"]
@@ -60,7 +61,7 @@ def test_a_collapsed_model_is_solved_again_with_census_and_the_sound_one_kept():
 def test_no_params_means_the_defaults():
     run, calls = runs(model(jump=0.0), model(jump=12.0))
     result, _ = with_recovery(run, None)
-    assert calls == [Params(), Params(matching_cost=recovery.RECOVERY_COST)]
+    assert calls == [Params(), Params().replace(**recovery.RECOVERY)]
     assert result.recovery["kept"] == "retry"
 
 
@@ -90,7 +91,7 @@ def test_a_retry_that_is_no_sounder_is_dropped():
 @pytest.mark.parametrize("params, first_jump", [
     (Params(), 10.0),                              # a sound model
     (Params(recover=False), 0.0),                  # collapsed, recovery switched off
-    (Params(matching_cost="ad_census"), 0.0),      # collapsed, census already
+    (Params().replace(**recovery.RECOVERY), 0.0),  # collapsed, the recovery's already
 ])
 def test_no_second_solve_without_need_or_leave(params, first_jump):
     run, calls = runs(model(jump=first_jump), model(jump=12.0))

@@ -168,8 +168,9 @@ def main_solve(args):
         print(line)
         recovery = summary.get("recovery", {})
         if recovery.get("retried"):
+            again = ", ".join(f"{k}={v}" for k, v in recovery["retry_params"].items())
             print(f"lss solve: the first model collapsed ({recovery['collapse']}); solved "
-                  f"again with {recovery['matching_cost']}, kept the "
+                  f"again with {again}, kept the "
                   f"{'second' if recovery['kept'] == 'retry' else 'first'} model")
     return 0
 

@@ -41,15 +41,29 @@ class Messages:
     subpixel : bool
         Refine each message's integer argmin to the vertex of a parabola (see
         ``Params.subpixel_messages``).
+    pool : FieldPool, optional
+        Where the distinctness planes live (needed with ``ambiguity > 0``).
+    ambiguity : float
+        0: Eq. 5's sigma_p alone.  > 0: a patch's precision is also weighted by the
+        distinctness of its matching-cost curve, ``q = clip((1 - r) / ambiguity, 0, 1)``
+        with the peak ratio ``r = (mean - second) / (mean - best)`` (``second``: the
+        lowest cost at least two candidates from the best): a periodic or flat curve with
+        several equally deep minima sends (almost) no message (see
+        ``Params.message_ambiguity``).
     """
 
-    def __init__(self, hierarchy, subpixel=True):
+    def __init__(self, hierarchy, subpixel=True, pool=None, ambiguity=0.0):
         self.hierarchy = hierarchy
         self.levels = hierarchy.levels
         self.H, self.W, self.C = hierarchy.H, hierarchy.W, hierarchy.C
         self.lanes, self.image_blocks = hierarchy.lanes, hierarchy.image_blocks
         self.subpixel = bool(subpixel)
+        self.ambiguity = float(ambiguity)
+        # per level, q of every patch centre in lane blocks (as the level's ``key``)
+        self.distinct = ([pool.vector(self.lanes, ti.f32, (self.H, self.image_blocks))
+                          for _ in self.levels] if self.ambiguity > 0 else [])
         self._cached = None       # (beta, the hierarchy's cost_version) of the cache
+        self._distinct_version = None
 
     @ti.func
     def _refine(self, cost: ti.template(), y, x, arg):
@@ -142,6 +156,8 @@ class Messages:
             spread = beta * l1 / cf - best
             sigma = ti.select(w == 1, cf / (spread + 1e-8), 1.0)   # 1: no message
             a = ti.select(w == 1, 1.0 / (sigma * sigma), 0.0)
+            if ti.static(self.ambiguity > 0):
+                a *= self.distinct[level.index][y, blk]
             level.relay_a[y, blk] = a
             level.relay_b[y, blk] = a * d
             if ti.static(keep):
@@ -190,11 +206,41 @@ class Messages:
         if not use_prior and use_validity:
             raise ValueError("messages: validity needs the prior (iteration >= 2)")
         cached = (beta, self.hierarchy.cost_version)
+        if self.ambiguity > 0 and self._distinct_version != self.hierarchy.cost_version:
+            for i in range(len(self.levels)):
+                self._distinctness(i, self.levels[i].cost)
+            self._distinct_version = self.hierarchy.cost_version
         if self._cached != cached:
             for level in self.levels:
                 level.key.fill(0)
             self._cached = cached
         self._all_levels(beta, int(use_validity), bool(keep))
+
+    @ti.kernel
+    def _distinctness(self, i: ti.template(), cost: ti.template()):
+        """q of every patch centre of level ``i`` from its matching-cost curve (the cost
+        volumes do not change during a solve: computed once per set-up)."""
+        for y, blk in ti.ndrange(self.H, self.image_blocks):
+            for lane in range(self.lanes):
+                x = blk * self.lanes + lane
+                q = 0.0
+                if x < self.W:
+                    best, kb, total = 1e30, 0, 0.0
+                    for k in range(self.C):
+                        c = cost[y, x, k]
+                        total += c
+                        if c < best:
+                            best, kb = c, k
+                    second = 1e30
+                    for k in range(self.C):
+                        if ti.abs(k - kb) >= 2:
+                            second = ti.min(second, cost[y, x, k])
+                    mean = total / self.C
+                    r = 1.0
+                    if mean > best:
+                        r = ti.min((mean - ti.min(second, mean)) / (mean - best), 1.0)
+                    q = ti.min(ti.max((1.0 - r) / self.ambiguity, 0.0), 1.0)
+                self.distinct[i][y, blk][lane] = q
 
     @ti.kernel
     def _all_levels(self, beta: ti.f32, use_validity: ti.i32, keep: ti.template()):

@@ -21,7 +21,7 @@ __all__ = [
     "patch_messages", "consensus", "median_filter", "convolve", "gaussian_derivatives",
     "curvature", "interp_row", "interp_volume", "shape_value", "basis", "fit_shape",
     "delta_theta", "boundary_weight", "levelset_step", "squared_distance", "reinitialise",
-    "disparity", "near_pixels", "dilate", "grow_region", "left_cost", "refine_layers",
+    "disparity", "distinctness", "near_pixels", "dilate", "grow_region", "left_cost", "refine_layers",
 ]
 
 
@@ -129,6 +129,25 @@ def patch_messages(cost, d_mean, beta, subpixel=True):
         ok = inner & (c0 <= cm) & (c0 <= cp) & (den > 1e-12)
         d_p += np.where(ok, np.clip(0.5 * (cm - cp) / np.where(ok, den, 1.0), -0.5, 0.5), 0.0)
     return d_p, sigma
+
+
+def distinctness(cost, ambiguity):
+    """The weight of a patch's message by the distinctness of its cost curve ``cost[..., k]``
+    (:class:`lss_kernels.model.messages.Messages` with ``ambiguity > 0``):
+    ``clip((1 - r) / ambiguity, 0, 1)`` with ``r = (mean - second) / (mean - best)``,
+    ``second`` the lowest cost at least two candidates from the (first) argmin; ``r = 1`` on
+    a flat curve."""
+    cost = np.asarray(cost, np.float64)
+    k = np.arange(cost.shape[-1])
+    best_k = cost.argmin(axis=-1)
+    best = cost.min(axis=-1)
+    far = np.abs(k - best_k[..., None]) >= 2
+    second = np.where(far, cost, np.inf).min(axis=-1)
+    mean = cost.mean(axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.where(mean > best, np.minimum((mean - np.minimum(second, mean)) / (mean - best),
+                                             1.0), 1.0)
+    return np.clip((1.0 - r) / ambiguity, 0.0, 1.0)
 
 
 def consensus(d_p, sigma_p, valid, sizes):
