@@ -100,6 +100,17 @@ def test_no_second_solve_without_need_or_leave(params, first_jump):
     assert (result.recovery["collapse"] is None) == (first_jump > 1.0)
 
 
+def test_a_periodic_cost_curve_gets_less_confidence_than_a_unimodal_one():
+    """The distinctness weight of the messages (reference.distinctness, held to the kernel
+    in test_kernels): two equally deep minima a period apart weigh 0, one clear minimum 1."""
+    from lss_kernels.reference import kernels as ref
+    c = np.arange(24)
+    unimodal = 1.0 - np.exp(-((c - 9) / 2.0) ** 2)
+    periodic = 1.0 - np.cos(2 * np.pi * c / 6.0) ** 8        # minima every 3 candidates
+    weights = ref.distinctness(np.stack([unimodal, periodic]), 0.2)
+    assert weights[0] == pytest.approx(1.0) and weights[1] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_params_recover_is_validated():
     with pytest.raises(ValueError, match="params.recover"):
         Params(recover="yes")

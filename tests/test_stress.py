@@ -173,3 +173,22 @@ def test_command_line(tmp_path, capsys):
     assert stress.main([str(tmp_path / "file"), "--size", "small"]) == 1
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "not a folder" in err
+
+
+#: One scene per family, small size, seed 0, and its occlusion-F1 floor (about 0.05 under
+#: what the default solve measured; the recovery solve rescues curved_ball_dark and
+#: weak_bg_dark; the small periodic scenes are at the edge of what the solver does).
+FAMILY_FLOORS = {"camouflage_noise_noisy": 0.85, "curved_ball_dark": 0.8,
+                 "init_spill30": 0.9, "jump_60_far": 0.95, "shape_L": 0.85,
+                 "weak_bg_dark": 0.9, "periodic_both_p7": 0.45}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(FAMILY_FLOORS))
+def test_each_family_solves_above_its_floor(scenes, ti_arch, name):
+    from lss_kernels import solve
+    assert {n.split("_")[0] for n in FAMILY_FLOORS} == set(stress.STRESS_FAMILIES)
+    scene = scenes[name]
+    result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse)
+    f1 = score(result.disparity, result.occlusion, scene)["occ_f1"]
+    assert f1 >= FAMILY_FLOORS[name], (name, f1, result.recovery)
