@@ -422,12 +422,6 @@ def grow_region(d, seed, seed_d, tolerance, step):
     return region
 
 
-def _window_sum(a, r):
-    """Sums of ``a`` (``(H, W, ...)``) over the in-image pixels of the ``(2 r + 1)^2``
-    window around each pixel."""
-    return box_sum(a, 2 * r + 1)
-
-
 def left_cost(left, right, d, censuses):
     """The AD-Census cost (as :func:`matching_cost`) of every left pixel (y, x) against the
     right pixel (y, x - d); NaN where x - d leaves the image.  ``censuses``: the
@@ -462,8 +456,8 @@ def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ra
             c = costs_by_d[d]
             inside = np.isfinite(c)
             for lab in layers:
-                num = _window_sum(np.where(inside & lab, c, 0.0), window)
-                den = _window_sum((inside & lab).astype(float), window)
+                num = box_sum(np.where(inside & lab, c, 0.0), 2 * window + 1)
+                den = box_sum((inside & lab).astype(float), 2 * window + 1)
                 k = d - base + R
                 ok = lab & inside & (k >= 0) & (k <= 2 * R) & (den > 0)
                 costs[np.where(ok, k, 0), np.arange(H)[:, None], np.arange(W)] = np.where(
@@ -483,10 +477,10 @@ def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ra
         residual = np.where(ok, base + kb - R + sub - S, 0.0)
         weight = ok.astype(float)
         for lab in layers:
-            num = (_window_sum(weight * residual * lab, smoothing)
-                   + wide_weight * _window_sum(weight * residual * lab, 4 * smoothing))
-            den = (_window_sum(weight * lab, smoothing)
-                   + wide_weight * _window_sum(weight * lab, 4 * smoothing))
+            num = (box_sum(weight * residual * lab, 2 * smoothing + 1)
+                   + wide_weight * box_sum(weight * residual * lab, 8 * smoothing + 1))
+            den = (box_sum(weight * lab, 2 * smoothing + 1)
+                   + wide_weight * box_sum(weight * lab, 8 * smoothing + 1))
             S = np.where(lab & (den > 0), S + num / np.where(den > 0, den, 1.0), S)
         S = np.clip(S, 0.0, d_max)
     return S
