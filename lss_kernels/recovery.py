@@ -1,4 +1,4 @@
-"""A collapsed solve is recognised from its own model and solved again with the census cost.
+"""A collapsed solve is recognised from its own model and solved again with safer parameters.
 
 On weak, dark or periodic textures the paper's absolute-difference cost (Sec. 4) can lead
 the alternation to a model that explains nothing: the foreground vanishes or fills the image,
@@ -41,7 +41,6 @@ def model_health(result) -> dict:
     """``area`` (foreground fraction, cyclopean), ``jump`` (mean left-view jump over the
     foreground) and ``crossing`` (fraction of the foreground where Theta_1 <= Theta_2)."""
     fg = np.asarray(result.phi) > 0
-    H, W = fg.shape
     if not fg.any():
         return {"area": 0.0, "jump": 0.0, "crossing": 1.0}
     y, x = np.nonzero(fg)
