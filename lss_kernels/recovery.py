@@ -10,14 +10,16 @@ truth:
 - the mean jump ``2 (Theta_1 - Theta_2)`` over the foreground is below ``MIN_JUMP``
   left-view pixels;
 - the foreground surface lies at or behind the background on more than ``MAX_CROSSING`` of
-  the foreground (the "foreground" is not in front).
+  the foreground (the "foreground" is not in front);
+- the foreground surface leaves the searched disparity range ``[0, d_max]`` on more than
+  ``MAX_OUT_OF_RANGE`` of the foreground (no match there supports it: on periodic texture a
+  quadratic bent far out of range can still explain the stripes).
 
 The pair is then solved again with the parameters changed by ``RECOVERY``: the AD-Census
 cost (it matches dark and low-contrast texture by the order of grey values) and messages
 weighted by the distinctness of their cost curves (a periodic texture's patches, whose
 curves have several equally deep minima, send almost none; ``Params.message_ambiguity``).
-The second model is kept only when it is sound and has a larger jump and less crossing than
-the first; otherwise the first stays.  ``Result.recovery`` records what happened.
+The second model is kept when it is sound; otherwise the first stays.  ``Result.recovery`` records what happened.
 
 Neither change is the default: on the paper's scenes AD-Census lowers the mean occlusion F1
 from 0.79 to 0.76 and the distinctness weights to 0.76 (``docs/design.md``).
@@ -26,30 +28,34 @@ import numpy as np
 
 from .model.init import InitError
 
-__all__ = ["MAX_CROSSING", "MIN_JUMP", "RECOVERY", "collapse", "model_health",
-           "with_recovery"]
+__all__ = ["MAX_CROSSING", "MAX_OUT_OF_RANGE", "MIN_JUMP", "RECOVERY", "collapse",
+           "model_health", "with_recovery"]
 
 #: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
 MIN_JUMP = 1.0
 #: Largest fraction of the foreground where Theta_1 <= Theta_2 in a sound model.
 MAX_CROSSING = 0.5
+#: Largest fraction of the foreground where Theta_1 lies outside [0, d_max] in a sound model.
+MAX_OUT_OF_RANGE = 0.02
 #: The parameters of the second solve.
 RECOVERY = {"matching_cost": "ad_census", "message_ambiguity": 0.2}
 
 
-def model_health(result) -> dict:
+def model_health(result, d_max) -> dict:
     """``area`` (foreground fraction, cyclopean), ``jump`` (mean left-view jump over the
-    foreground) and ``crossing`` (fraction of the foreground where Theta_1 <= Theta_2)."""
+    foreground), ``crossing`` (fraction of the foreground where Theta_1 <= Theta_2) and
+    ``out_of_range`` (fraction of the foreground where Theta_1 is outside ``[0, d_max]``)."""
     fg = np.asarray(result.phi) > 0
     if not fg.any():
-        return {"area": 0.0, "jump": 0.0, "crossing": 1.0}
+        return {"area": 0.0, "jump": 0.0, "crossing": 1.0, "out_of_range": 0.0}
     y, x = np.nonzero(fg)
     x, y = x.astype(np.float64), y.astype(np.float64)
     basis = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=-1)
-    jump = basis @ (np.asarray(result.theta_fg, np.float64)
-                    - np.asarray(result.theta_bg, np.float64))
+    front = basis @ np.asarray(result.theta_fg, np.float64)
+    jump = front - basis @ np.asarray(result.theta_bg, np.float64)
     return {"area": float(fg.mean()), "jump": float(jump.mean()),
-            "crossing": float((jump <= 0).mean())}
+            "crossing": float((jump <= 0).mean()),
+            "out_of_range": float(((front < 0) | (front > float(d_max))).mean())}
 
 
 def collapse(health: dict):
@@ -64,17 +70,21 @@ def collapse(health: dict):
     if health["crossing"] > MAX_CROSSING:
         return (f"the foreground lies behind the background on {health['crossing']:.0%} "
                 f"of it (> {MAX_CROSSING:.0%})")
+    if health["out_of_range"] > MAX_OUT_OF_RANGE:
+        return (f"the foreground surface leaves [0, d_max] on {health['out_of_range']:.0%} "
+                f"of the foreground (> {MAX_OUT_OF_RANGE:.0%})")
     return None
 
 
-def with_recovery(run, params):
+def with_recovery(run, params, d_max):
     """``run(params) -> (result, extra)`` once, and again with ``RECOVERY`` when the
     first model collapsed (and ``params.recover``); returns the ``(result, extra)`` kept,
-    with ``result.recovery`` set.  ``params`` None: the defaults."""
+    with ``result.recovery`` set.  ``params`` None: the defaults; ``d_max``: the searched
+    range (left-view pixels)."""
     from .params import Params
     params = Params() if params is None else params
     result, extra = run(params)
-    first = model_health(result)
+    first = model_health(result, d_max)
     reason = collapse(first)
     record = {"health": first, "collapse": reason, "retried": False}
     second_params = params.replace(**RECOVERY)
@@ -88,9 +98,8 @@ def with_recovery(run, params):
         record.update(retry_error=str(error), kept="first")
         result.recovery = record
         return result, extra
-    second = model_health(second_result)
-    kept = (collapse(second) is None and second["jump"] > first["jump"]
-            and second["crossing"] <= first["crossing"])
+    second = model_health(second_result, d_max)
+    kept = collapse(second) is None
     record.update(retry_health=second,
                   retry_collapse=collapse(second), kept="retry" if kept else "first")
     if kept:

@@ -9,6 +9,7 @@ from lss_kernels import Params, recovery
 from lss_kernels.recovery import collapse, model_health, with_recovery
 
 H, W = 20, 30
+D_MAX = 64.0
 
 
 def model(jump=10.0, slope=0.0, region=(slice(5, 15), slice(10, 20))):
@@ -22,21 +23,36 @@ def model(jump=10.0, slope=0.0, region=(slice(5, 15), slice(10, 20))):
 
 
 def test_a_sound_model_has_a_jump_in_front():
-    health = model_health(model(jump=10.0))
-    assert health == {"area": 100 / (H * W), "jump": pytest.approx(10.0), "crossing": 0.0}
+    health = model_health(model(jump=10.0), D_MAX)
+    assert health == {"area": 100 / (H * W), "jump": pytest.approx(10.0), "crossing": 0.0,
+                      "out_of_range": 0.0}
     assert collapse(health) is None
 
 
 def test_each_kind_of_collapse_is_named():
-    assert collapse(model_health(model(region=None))) == "the foreground vanished"
+    assert collapse(model_health(model(region=None), D_MAX)) == "the foreground vanished"
     full = model(region=(slice(None), slice(None)))
-    assert collapse(model_health(full)) == "the foreground filled the image"
-    assert "mean jump 0.30 px" in collapse(model_health(model(jump=0.3)))
+    assert collapse(model_health(full, D_MAX)) == "the foreground filled the image"
+    assert "mean jump 0.30 px" in collapse(model_health(model(jump=0.3), D_MAX))
     # Theta_1 - Theta_2 = x - 10: behind on columns 0..5, 15..19 px in front on 25..29
     split = model(jump=-10.0, slope=1.0, region=(slice(5, 15), np.r_[0:6, 25:30]))
-    health = model_health(split)
+    health = model_health(split, D_MAX)
     assert health["jump"] == pytest.approx(40 / 11) and health["crossing"] == pytest.approx(6 / 11)
     assert "behind the background on 55%" in collapse(health)
+
+
+def test_a_foreground_surface_bent_out_of_the_searched_range_is_a_collapse():
+    # Theta_1 = 30 + 3 (x - 10) on columns 10..19: above d_max = 64 from x = 22 on, never
+    # on the object; the same slope over columns 10..29 leaves the range on columns 22..29
+    inside = model(jump=10.0, slope=3.0)
+    inside.theta_fg[-1] -= 30.0
+    assert collapse(model_health(inside, D_MAX)) is None
+    wide = model(jump=10.0, slope=3.0, region=(slice(5, 15), slice(10, 30)))
+    wide.theta_fg[-1] -= 30.0
+    health = model_health(wide, D_MAX)
+    assert health["out_of_range"] == pytest.approx(8 / 20)
+    assert "leaves [0, d_max] on 40%" in collapse(health)
+    assert collapse(model_health(wide, 100.0)) is None
 
 
 def runs(*models):
@@ -51,7 +67,7 @@ def runs(*models):
 
 def test_a_collapsed_model_is_solved_again_with_census_and_the_sound_one_kept():
     run, calls = runs(model(jump=0.1), model(jump=12.0))
-    result, extra = with_recovery(run, Params())
+    result, extra = with_recovery(run, Params(), D_MAX)
     assert calls == [Params(), Params().replace(**recovery.RECOVERY)]
     assert extra == 2 and result.recovery["kept"] == "retry"
     assert result.recovery["retry_health"]["jump"] == pytest.approx(12.0)
@@ -60,7 +76,7 @@ def test_a_collapsed_model_is_solved_again_with_census_and_the_sound_one_kept():
 
 def test_no_params_means_the_defaults():
     run, calls = runs(model(jump=0.0), model(jump=12.0))
-    result, _ = with_recovery(run, None)
+    result, _ = with_recovery(run, None, D_MAX)
     assert calls == [Params(), Params().replace(**recovery.RECOVERY)]
     assert result.recovery["kept"] == "retry"
 
@@ -75,15 +91,25 @@ def test_a_retry_that_finds_no_start_keeps_the_first():
         if len(calls) == 2:
             raise InitError("init auto: no foreground found")
         return first, 1
-    result, extra = with_recovery(run, Params())
+    result, extra = with_recovery(run, Params(), D_MAX)
     assert result is first and result.recovery["kept"] == "first"
     assert "no foreground found" in result.recovery["retry_error"]
+
+
+def test_a_sound_retry_is_kept_even_with_a_smaller_jump():
+    # a first model bent out of range (jump 40 on average) against a sound one (jump 12)
+    first = model(jump=10.0, slope=3.0, region=(slice(5, 15), slice(10, 30)))
+    first.theta_fg[-1] -= 30.0
+    run, calls = runs(first, model(jump=12.0))
+    result, _ = with_recovery(run, Params(), D_MAX)
+    assert len(calls) == 2 and result.recovery["kept"] == "retry"
+    assert result.recovery["health"]["jump"] > result.recovery["retry_health"]["jump"]
 
 
 def test_a_retry_that_is_no_sounder_is_dropped():
     first = model(jump=0.5)
     run, calls = runs(first, model(jump=0.2))
-    result, extra = with_recovery(run, Params())
+    result, extra = with_recovery(run, Params(), D_MAX)
     assert result is first and extra == 1 and result.recovery["kept"] == "first"
     assert result.recovery["retry_collapse"] is not None
 
@@ -95,7 +121,7 @@ def test_a_retry_that_is_no_sounder_is_dropped():
 ])
 def test_no_second_solve_without_need_or_leave(params, first_jump):
     run, calls = runs(model(jump=first_jump), model(jump=12.0))
-    result, _ = with_recovery(run, params)
+    result, _ = with_recovery(run, params, D_MAX)
     assert len(calls) == 1 and result.recovery["retried"] is False
     assert (result.recovery["collapse"] is None) == (first_jump > 1.0)
 
