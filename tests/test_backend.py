@@ -131,6 +131,7 @@ print(json.dumps(seen))
 """
 
 
+@pytest.mark.slow
 def test_kernels_without_volumes_are_cached_across_search_ranges(tmp_path, ti_arch):
     """Taichi keys a kernel's offline-cache entry on the SNode trees it touches.  With the
     volumes in a tree of their own, a new search range at a known image size compiles only

@@ -60,6 +60,7 @@ def _mtimes(out):
     return {p.parent.name: p.stat().st_mtime_ns for p in out.glob("*/summary.json")}
 
 
+@pytest.mark.slow
 def test_two_workers_write_the_maps_of_lss_solve(scenes, tmp_path):
     solves = [subprocess.Popen(
         [sys.executable, "-m", "lss_kernels.apps.cli", "solve", "--scene", str(scenes / name),
@@ -178,6 +179,7 @@ def test_manifest_pairs_name_their_folders_and_match_scene_folders(scenes, clust
     assert sorted(report.solved) == ["pair-one", "s0"]
 
 
+@pytest.mark.slow
 def test_eval_on_two_workers_gives_the_table_of_one(tmp_path, ti_arch):
     from lss_kernels.apps.evaluate import run_eval
     for seed, name in enumerate(("a", "b")):

@@ -103,6 +103,7 @@ def test_lss_demo_with_no_arguments(tmp_path):
     assert iio.imread(out / "patch.png").ndim == 3
 
 
+@pytest.mark.slow
 def test_demo_end_to_end_on_tiny_scene(ti_arch, tmp_path, capsys):
     pytest.importorskip("lss_kernels.scenes")
     out = tmp_path / "demo"

@@ -18,6 +18,8 @@ import textwrap
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow   # three solves in a fresh process (~30 s)
+
 ATOL = 1e-4          # left-view pixels / phi units, 1 vs 2 threads
 MASK_TOL = 0.002     # fraction of pixels whose label may differ, 1 vs 2 threads
 FIELDS = ("disparity", "occlusion", "foreground", "phi", "consensus_mean", "consensus_sigma",

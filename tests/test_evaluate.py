@@ -134,6 +134,7 @@ def test_process_pool_matches_in_process(dataset, tmp_path, capsys):
     assert len(progress) == 4 and progress[-1].startswith("[4/4] ")
 
 
+@pytest.mark.slow
 def test_lss_scenes_of_one_size_share_a_solver_and_match_a_fresh_solve(dataset, tmp_path,
                                                                        monkeypatch):
     from lss_kernels import solver as solver_module
@@ -163,6 +164,7 @@ def test_lss_scenes_of_one_size_share_a_solver_and_match_a_fresh_solve(dataset, 
     assert (row["occ_f1"], row["bad4"]) == (s["occ_f1"], s["bad4"])
 
 
+@pytest.mark.slow
 def test_trace_scores_every_stop_window_and_replays_the_rule(dataset, tmp_path):
     import imageio.v3 as iio
     from lss_kernels.stopping import replay

@@ -164,7 +164,7 @@ def test_solve_writes_the_refined_map_and_the_surface(ti_arch, tmp_path, capsys,
     from lss_kernels.apps.cli import main
     from lss_kernels.io import read_pfm
     out = tmp_path / "out"
-    args = ["solve", "--preset", "easy", "--out", str(out), "--arch", ti_arch,
+    args = ["solve", "--preset", "tiny", "--out", str(out), "--arch", ti_arch,
             "--max-iterations", "30", "--quiet"] + ([] if refine else ["--no-refine"])
     assert main(args) == 0, capsys.readouterr().err
     disparity, surface = read_pfm(out / "disparity.pfm"), read_pfm(out / "surface.pfm")
