@@ -102,3 +102,38 @@ def test_synthetic_pair_and_cli_registration():
     args = parser.parse_args(["bench", "--quick", "--json", "--threads", "2", "1"])
     assert args.func is bench.main_bench and args.quick and args.json
     assert args.threads == [2, 1] and args.arch == "auto"      # every command: auto
+
+
+def _side_by_side():
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "demos" / "side_by_side.py"
+    spec = importlib.util.spec_from_file_location("side_by_side", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_side_by_side_table_has_per_scene_ratios_and_medians():
+    sbs = _side_by_side()
+
+    def run(seconds, iterations, f1):
+        return {"seconds": seconds, "iterations": iterations, "f1": f1}
+    rows = [{"scene": "a", "base": run(10.0, 300, 0.8), "head": run(5.0, 100, 0.9)},
+            {"scene": "b", "base": run(6.0, 200, 0.6), "head": run(6.0, 200, 0.5)},
+            {"scene": "c", "base": run(9.0, 400, 0.7), "head": run(2.0, 120, 0.7)}]
+    lines = sbs.render(rows, "abc123").splitlines()
+    assert "base = `abc123`" in lines[0]
+    assert "| a | 10.0 | 5.0 | 2.00 | 300 | 100 | 0.800 | 0.900 |" in lines
+    # medians: base 9.0 s, head 5.0 s, ratio median(2, 1, 4.5) = 2, iterations 300 / 120;
+    # F1 means 0.7 / 0.7
+    assert lines[-1] == "| **median** (F1: mean) | 9.0 | 5.0 | 2.00 | 300 | 120 | 0.700 | 0.700 |"
+
+
+def test_side_by_side_exports_a_commit_and_finds_its_entry_point(tmp_path):
+    sbs = _side_by_side()
+    if not (sbs.ROOT / ".git").exists():
+        pytest.skip("not a git checkout")
+    tree = sbs.export("HEAD", tmp_path)
+    assert (tree / "lss_kernels" / "__init__.py").is_file()
+    assert sbs.entry_point(tree) == ("lss_kernels.apps.cli", "main")
