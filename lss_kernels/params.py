@@ -145,7 +145,7 @@ class Params:
     exclusive_fit: bool = False
     subpixel_messages: bool = True
     refine: bool = True
-    refine_passes: tuple = ((24, 9, 8), (4, 4, 2))
+    refine_passes: tuple = ((24, 7, 8), (4, 4, 2))
     refine_ratio: float = 0.9
     message_ambiguity: float = 0.0
     recover: bool = True

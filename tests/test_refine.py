@@ -99,6 +99,26 @@ def test_kernels_match_the_numpy_specification(ti_arch):
     assert np.abs(got - want).mean() < 1e-3
 
 
+def test_a_surface_outside_the_searched_range_is_clamped_first(ti_arch):
+    """A quadratic may leave [0, d_max] where its layer lies (paper15 scene 2's background
+    does): the sweep starts from the surface clamped to the range, so a background at 6 px
+    whose surface says -40 px (all its candidates below 0 otherwise) is found; NaN and
+    infinity count as 0."""
+    d_fg, d_bg, fg = two_layers(jump=(30.0, 6.0))
+    left, right, occ = render(d_fg, d_bg, fg, seed=4)
+    surface = np.where(fg, 30.0, -40.0)
+    surface[0, :3] = [np.nan, np.inf, -np.inf]
+    passes = Params().refine_passes
+    got = run_kernels(left, right, surface, fg, occ, 40.0, passes)
+    clamped = np.clip(np.where(np.isfinite(surface), surface, 0.0), 0.0, 40.0)
+    np.testing.assert_array_equal(got, run_kernels(left, right, clamped, fg, occ, 40.0, passes))
+    x = np.arange(fg.shape[1])[None]
+    seen = ~occ & ~fg & (x >= 40)
+    assert np.abs(got - 6.0)[seen].mean() < 0.5
+    want = ref.refine_layers(left, right, surface, fg, occ, 40.0, passes, 0.9)
+    assert np.abs(got - want).mean() < 1e-3
+
+
 def test_a_sinusoidal_bump_and_a_sphere_are_recovered(ti_arch):
     """Layers no quadratic describes: the background carries a sinusoidal bump of 3 px, the
     object is a sphere cap 5 px deep; started from flat surfaces, the refinement recovers

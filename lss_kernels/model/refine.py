@@ -123,9 +123,14 @@ class LayerRefinement:
     # ------------------------------------------------------------------ the passes
     @ti.kernel
     def _load(self, surface: ti.template(), foreground: ti.template(),
-              occlusion: ti.template()):
+              occlusion: ti.template(), d_max: ti.f32):
+        """The surface clamped to the searched range ``[0, d_max]`` (a quadratic can leave
+        it; its candidates would then lie outside the sweep), non-finite values as 0."""
         for y, x in self.surface:
-            self.surface[y, x] = surface[y, x]
+            s = surface[y, x]
+            if not (s >= 0.0 and s <= 3.0e38):
+                s = 0.0
+            self.surface[y, x] = ti.min(s, d_max)
             self.label[y, x] = 1 - foreground[y, x]
             self.visible[y, x] = 1 - occlusion[y, x]
 
@@ -244,12 +249,13 @@ class LayerRefinement:
         self._accumulate(WIDE_WEIGHT)
 
     def run(self, left, right, surface, foreground, occlusion, d_max):
-        """Refine the left-view ``surface`` (f32 plane) of the layers ``foreground`` (i32, 1
-        on the foreground) with ``occlusion`` (i32, 1 where the right camera cannot see);
+        """Refine the left-view ``surface`` (f32 plane; clamped to ``[0, d_max]`` first) of
+        the layers ``foreground`` (i32, 1 on the foreground) with ``occlusion`` (i32, 1
+        where the right camera cannot see);
         ``left``, ``right``: RGB vector fields in [0, 1].  The refined map is left in
         ``surface``."""
         self.matching.setup(left, right)
-        self._load(surface, foreground, occlusion)
+        self._load(surface, foreground, occlusion, float(d_max))
         for R, window, smoothing in self.passes:
             self._start_pass(R)
             low, high = (int(v) for v in self.span.to_numpy())

@@ -442,9 +442,11 @@ def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ra
     """Surface plus parallax (:mod:`lss_kernels.model.refine`): per pass ``(R, window,
     smoothing)``, the layer-restricted window mean of the AD-Census cost for the candidates
     ``round(S) - R .. round(S) + R``, the distinct interior best (peak ratio) refined by a
-    parabola, the layer-restricted average of its residual, added to S and clamped."""
+    parabola, the layer-restricted average of its residual, added to S and clamped.  S
+    starts clamped to ``[0, d_max]`` (non-finite: 0)."""
     H, W = surface.shape
-    S = np.asarray(surface, np.float64).copy()
+    S = np.asarray(surface, np.float64)
+    S = np.clip(np.where(np.isfinite(S), S, 0.0), 0.0, d_max)
     layers = [np.asarray(foreground, bool), ~np.asarray(foreground, bool)]
     visible = ~np.asarray(occlusion, bool)
     censuses = census(left), census(right)
