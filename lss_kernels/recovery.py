@@ -19,7 +19,8 @@ The pair is then solved again with the parameters changed by ``RECOVERY``: the A
 cost (it matches dark and low-contrast texture by the order of grey values) and messages
 weighted by the distinctness of their cost curves (a periodic texture's patches, whose
 curves have several equally deep minima, send almost none; ``Params.message_ambiguity``).
-The second model is kept when it is sound; otherwise the first stays.  ``Result.recovery`` records what happened.
+The second model is kept when it is sound; otherwise the first stays.  ``Result.recovery``
+records what happened.
 
 Neither change is the default: on the paper's scenes AD-Census lowers the mean occlusion F1
 from 0.79 to 0.76 and the distinctness weights to 0.76 (``docs/design.md``).
