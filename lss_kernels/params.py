@@ -112,10 +112,11 @@ class Params:
         curve's distinctness ``clip((1 - r) / message_ambiguity, 0, 1)``, ``r`` the peak
         ratio of the second-deepest minimum (:class:`~lss_kernels.model.messages.Messages`).
     recover : bool
-        A model that collapsed (no foreground, no disparity jump, or the foreground behind
-        the background) is solved again with the AD-Census cost and the sounder model kept
-        (:mod:`lss_kernels.recovery`; :func:`~lss_kernels.solve`, ``lss solve``, ``lss
-        batch`` and ``lss eval``; a bare ``Solver.run`` does not).
+        A model that collapsed (no foreground, no disparity jump, the foreground behind the
+        background, or its surface outside ``[0, d_max]``) is solved again with the
+        AD-Census cost and distinctness-weighted messages, and the second model kept when it
+        is sound (:mod:`lss_kernels.recovery`; :func:`~lss_kernels.solve`, ``lss solve``,
+        ``lss batch`` and ``lss eval``; a bare ``Solver.run`` does not).
     """
 
     dt: float = 0.2

@@ -100,10 +100,10 @@ def with_recovery(run, params, d_max):
         result.recovery = record
         return result, extra
     second = model_health(second_result, d_max)
-    kept = collapse(second) is None
-    record.update(retry_health=second,
-                  retry_collapse=collapse(second), kept="retry" if kept else "first")
-    if kept:
+    second_reason = collapse(second)
+    record.update(retry_health=second, retry_collapse=second_reason,
+                  kept="first" if second_reason else "retry")
+    if second_reason is None:
         second_result.recovery = record
         return second_result, second_extra
     result.recovery = record

@@ -16,12 +16,12 @@ from ..kernels.filters import gaussian_taps
 from ..model import FIXED_POINT_STEPS
 
 __all__ = [
-    "census", "matching_cost", "box_sum", "box_mean", "box_extreme", "patches_containing", "patch_costs",
-    "huber_weight",
-    "patch_messages", "consensus", "median_filter", "convolve", "gaussian_derivatives",
-    "curvature", "interp_row", "interp_volume", "shape_value", "basis", "fit_shape",
-    "delta_theta", "boundary_weight", "levelset_step", "squared_distance", "reinitialise",
-    "disparity", "distinctness", "near_pixels", "dilate", "grow_region", "left_cost", "refine_layers",
+    "census", "matching_cost", "box_sum", "box_mean", "box_extreme", "patches_containing",
+    "patch_costs", "huber_weight", "patch_messages", "distinctness", "consensus",
+    "median_filter", "convolve", "gaussian_derivatives", "curvature", "interp_row",
+    "interp_volume", "shape_value", "basis", "fit_shape", "delta_theta", "boundary_weight",
+    "levelset_step", "squared_distance", "reinitialise", "disparity", "near_pixels", "dilate",
+    "grow_region", "left_cost", "refine_layers",
 ]
 
 
