@@ -492,4 +492,4 @@ def solve(left, right, d_max, init, params=None, arch=None, callback=None, init_
             return solver.run(callback), None
         finally:
             solver.close()
-    return with_recovery(run, params if params is not None else Params(), d_max)[0]
+    return with_recovery(run, params if params is not None else Params(), d_max, left)[0]

@@ -126,6 +126,84 @@ def test_no_second_solve_without_need_or_leave(params, first_jump):
     assert (result.recovery["collapse"] is None) == (first_jump > 1.0)
 
 
+def stripes(period, shape=(64, 160), phase=0.0):
+    """Vertical sinusoidal stripes of ``period`` pixels, grey in [0, 1]."""
+    x = np.arange(shape[1])
+    return np.broadcast_to(0.5 + 0.4 * np.sin(2 * np.pi * (x + phase) / period), shape).copy()
+
+
+def autocorrelation_score(tile, lags):
+    """The score of one tile written out: the correlation of the gradient with itself
+    shifted by each lag, and half the largest rise from a dip to a later local peak."""
+    gx = np.diff(tile, axis=1)
+    width = gx.shape[1] - lags
+    base = gx[:, :width]
+    rho = [np.sum(base * gx[:, t:t + width]) /
+           np.sqrt(np.sum(base ** 2) * np.sum(gx[:, t:t + width] ** 2)) for t in range(1, lags + 1)]
+    best = 0.0
+    for i in range(1, lags - 1):
+        if rho[i] >= rho[i - 1] and rho[i] >= rho[i + 1]:
+            best = max(best, (rho[i] - min(rho[:i])) / 2)
+    return min(best, 1.0)
+
+
+def test_periodicity_of_a_tile_follows_its_written_out_definition():
+    rng = np.random.default_rng(3)
+    th, tw = recovery.TILE
+    tile = rng.random((th, tw + recovery.MAX_PERIOD + 1)) + stripes(9, (th, tw + 33))
+    score = recovery.periodicity(tile)
+    assert score.shape == (1, 1)
+    assert score[0, 0] == pytest.approx(autocorrelation_score(tile, recovery.MAX_PERIOD))
+
+
+@pytest.mark.parametrize("period", [3, 6, 11, 24])
+def test_stripes_are_periodic_and_noise_is_not(period):
+    rng = np.random.default_rng(period)
+    assert recovery.periodic_fraction(stripes(period)) == 1.0
+    # sampled at whole pixels, stripes of 3 dip to only cos(2 pi / 3) = -0.5 at lag 1
+    assert recovery.periodicity(stripes(period)).min() > (0.74 if period == 3 else 0.9)
+    noise = rng.random((64, 160, 3))
+    assert recovery.periodicity(noise).max() < 0.4
+    assert recovery.periodic_fraction(noise) == 0.0
+
+
+def test_smooth_flat_and_small_images_are_not_periodic():
+    y, x = np.mgrid[0:64, 0:160]
+    assert recovery.periodic_fraction(np.sin(x / 40.0) + y / 64.0) == 0.0   # no dip and rise
+    assert recovery.periodic_fraction(np.full((64, 160), 0.5)) == 0.0       # no gradient
+    assert recovery.periodic_fraction(stripes(6, (10, 40))) == 0.0          # no whole tile
+
+
+def test_the_periodic_fraction_counts_the_striped_tiles():
+    rng = np.random.default_rng(0)
+    image = rng.random((64, 160))
+    image[:32] = stripes(7, (32, 160))            # 2 of 4 tile rows striped
+    assert recovery.periodic_fraction(image) == 0.5
+
+
+def test_a_periodic_pair_is_solved_with_the_recovery_unrefined_first_and_the_defaults_second():
+    run, calls = runs(model(jump=0.0), model(jump=12.0))
+    result, _ = with_recovery(run, Params(), D_MAX, left=stripes(6))
+    periodic = Params().replace(**recovery.RECOVERY, refine=False)
+    assert calls == [periodic, Params()] and recovery.PERIODIC["refine"] is False
+    assert result.recovery["periodic"] == 1.0
+    assert result.recovery["first_params"] == recovery.PERIODIC
+    assert result.recovery["kept"] == "retry"
+    assert result.recovery["retry_params"] == {"matching_cost": "ad", "message_ambiguity": 0.0,
+                                               "refine": True}
+
+
+def test_a_textured_pair_starts_with_the_given_params_and_records_its_periodicity():
+    run, calls = runs(model(jump=10.0))
+    rng = np.random.default_rng(1)
+    result, _ = with_recovery(run, Params(), D_MAX, left=rng.random((64, 160, 3)))
+    assert calls == [Params()] and result.recovery["periodic"] == 0.0
+    assert "first_params" not in result.recovery
+    run, calls = runs(model(jump=10.0))
+    with_recovery(run, Params(recover=False), D_MAX, left=stripes(6))
+    assert calls == [Params(recover=False)]
+
+
 def test_a_periodic_cost_curve_gets_less_confidence_than_a_unimodal_one():
     """The distinctness weight of the messages (reference.distinctness, held to the kernel
     in test_kernels): two equally deep minima a period apart weigh 0, one clear minimum 1."""

@@ -167,6 +167,10 @@ def main_solve(args):
                      f"bad-4.0 {summary['score']['bad4']:.2f}%")
         print(line)
         recovery = summary.get("recovery", {})
+        if "first_params" in recovery:
+            first = ", ".join(f"{k}={v}" for k, v in recovery["first_params"].items())
+            print(f"lss solve: periodic texture on {recovery['periodic']:.0%} of the left "
+                  f"image; solved with {first}")
         if recovery.get("retried"):
             again = ", ".join(f"{k}={v}" for k, v in recovery["retry_params"].items())
             print(f"lss solve: the first model collapsed ({recovery['collapse']}); solved "

@@ -152,9 +152,10 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False,
         def run(p):
             result, rows, spent = _solve(scene, p, trace, restart, init)
             return result, (rows, spent)
-        result, (rows, spent) = with_recovery(run, params, scene.d_max)
+        result, (rows, spent) = with_recovery(run, params, scene.d_max, scene.left)
         extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason),
                  "recovered": result.recovery.get("kept") == "retry",
+                 "periodic": "first_params" in result.recovery,
                  "bad4_surface": float(metrics.score(result.surface, result.occlusion,
                                                      scene)["bad4"])}
         if trace:
