@@ -723,67 +723,6 @@ def test_median_filter_matches_numpy_off_the_blocks_and_tiles(ti_arch, monkeypat
     np.testing.assert_array_equal(_median_of(a, k, lanes, monkeypatch), ref.median_filter(a, k))
 
 
-@pytest.mark.parametrize("lanes", [8, 1])
-@pytest.mark.parametrize("k", [3, 7])
-def test_median_filter_in_chunks_matches_numpy_also_in_place(ti_arch, monkeypatch, lanes, k):
-    """Chunks of 16 x 16 pixels: 37 x 53 takes 3 x 4 launches of the shared kernel, the last
-    ones partial; through a sink that writes into the filtered plane itself (as the initial
-    region's d-bar does), every chunk still reads the plane as it was."""
-    from lss_kernels.kernels import lanes as lanes_module
-    from lss_kernels.kernels import median
-    from lss_kernels.kernels.median import Assign, MedianFilter
-    monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
-    monkeypatch.setattr(median, "CHUNK_ROWS", 16)
-    monkeypatch.setattr(median, "CHUNK_COLUMNS", 16)
-    a = np.round(np.random.default_rng(k).standard_normal((37, 53)) * 2).astype(np.float32)
-    pool = FieldPool()
-    filt = MedianFilter(pool, 37, 53, k)
-    plane = pool.field(ti.f32, a.shape)
-    pool.finalize()
-    assert len(filt._chunks) == 12
-    plane.from_numpy(a)
-    filt.run(plane, Assign(plane))
-    np.testing.assert_array_equal(plane.to_numpy(), ref.median_filter(a, k))
-    pool.destroy()
-
-
-def _instantiations(kernel):
-    """How many instantiations a Taichi kernel has had in this process: the keys of its
-    template mapper, one compilation each.  The fields a key names are compiled in with their
-    shapes (a ``ti.data_oriented`` instance enters as itself); an ndarray enters by its
-    dtype and number of dimensions only."""
-    return len(kernel._primal.mapper.mapping)
-
-
-def test_median_filter_compiles_its_networks_once_for_every_size(ti_arch):
-    """The sort and merge kernel of a window size serves new image sizes without another
-    instantiation or compilation, while the store into the sink, a per-size kernel, takes
-    one per size (so the counts do see a new one)."""
-    from lss_kernels.kernels.median import Assign, MedianFilter, _Stages
-    pools, shared = [], set()
-    for i, (height, width) in enumerate(((37, 53), (48, 64), (5, 9))):
-        a = np.random.default_rng(height).standard_normal((height, width)).astype(np.float32)
-        pool = FieldPool()
-        filt = MedianFilter(pool, height, width, 7)
-        src, dst = pool.field(ti.f32, a.shape), pool.field(ti.f32, a.shape)
-        pool.finalize()
-        pools.append(pool)                 # kept: destroying a tree drops compiled kernels
-        shared.add(filt._stages)
-        src.from_numpy(a)
-        before = (_instantiations(_Stages.run), len(_Stages.run._primal.compiled_kernels),
-                  _instantiations(MedianFilter._store_medians))
-        filt.run(src, Assign(dst))
-        np.testing.assert_array_equal(dst.to_numpy(), ref.median_filter(a, 7))
-        after = (_instantiations(_Stages.run), len(_Stages.run._primal.compiled_kernels),
-                 _instantiations(MedianFilter._store_medians))
-        if i > 0:
-            assert after[:2] == before[:2]
-        assert after[2] == before[2] + 1
-    assert len(shared) == 1
-    for pool in pools:
-        pool.destroy()
-
-
 def _census_words(image):
     """:func:`lss_kernels.reference.kernels.census` packed as the kernel's two words."""
     bits = ref.census(image).astype(np.uint32)
@@ -809,34 +748,6 @@ def test_census_transform_matches_the_specification_bit_for_bit(ti_arch, height,
     np.testing.assert_array_equal(words, _census_words(image.astype(np.float64)))
     np.testing.assert_array_equal(matcher.census_right.to_numpy(), words)
     pool.destroy()
-
-
-def test_census_transform_compiles_once_for_every_size(ti_arch):
-    """The census kernel serves a new image size without another instantiation or
-    compilation; the copy of the words out, a per-size kernel, takes one per view and size."""
-    from lss_kernels.model.matching import _census
-    pools = []
-    for i, (height, width) in enumerate(((37, 53), (48, 64))):
-        rng = np.random.default_rng(height)
-        image = (np.round(rng.random((height, width, 3)) * 4) / 4).astype(np.float32)
-        pool = FieldPool()
-        matcher = MatchingCost(pool, height, width, "ad_census")
-        img = pool.vector(3, ti.f32, (height, width))
-        pool.finalize()
-        pools.append(pool)
-        img.from_numpy(image)
-        before = (_instantiations(_census), len(_census._primal.compiled_kernels),
-                  _instantiations(MatchingCost._store_words))
-        matcher.setup(img, img)
-        after = (_instantiations(_census), len(_census._primal.compiled_kernels),
-                 _instantiations(MatchingCost._store_words))
-        if i > 0:
-            assert after[:2] == before[:2]
-        assert after[0] == 1 and after[2] == before[2] + 2
-        np.testing.assert_array_equal(matcher.census_left.to_numpy(),
-                                      _census_words(image.astype(np.float64)))
-    for pool in pools:
-        pool.destroy()
 
 
 def test_derivatives_and_curvature_match_reference(levelset):

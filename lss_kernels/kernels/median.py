@@ -13,18 +13,6 @@ The filter writes through a *sink*: any ``ti.data_oriented`` object with a ``ti.
 ``begin()`` (run once, serially, before the pixels) and a ``ti.func`` ``store(y, x, value)``
 (once per pixel); :class:`Assign` is the plain one.  Nothing here knows of the paper: the level
 set hands it a sink that also counts sign flips and writes the disparity of Eq. 3.
-
-Both stages, the networks unrolled (4 to 5 s of compilation for ``k = 7``), are one kernel per
-window size and lane count that serves every image size (:class:`_Stages`): Taichi compiles a
-kernel again for every shape of the fields it reads, but not for the shape of an ndarray.  The
-filter copies its plane into an ndarray and the kernel takes the image's size as arguments, so
-it compiles once per process (and comes from Taichi's offline cache in the next), whatever the
-size; only the copy and the store into the sink, a loop each, compile per size.  The kernel's
-scratch stays in fields of a fixed shape, a chunk of the image per launch: LLVM packs the
-networks into SIMD lanes only through the constant strides of fields (through ndarrays, whose
-32-bit index arithmetic it cannot prove contiguous, it left every comparator scalar: 11.7
-against 1.9 ms at 760 x 340).  The copy and the extra launches cost ~0.3 ms of the median's
-~2 ms there.
 """
 import taichi as ti
 
@@ -222,44 +210,32 @@ class Assign:
         self.dst[y, x] = value
 
 
-#: The pixels one launch of the shared kernel covers (rows, a multiple of 8; columns, of 4): the
-#: size of its fixed-shape scratch.  An image of up to 512 x 1024 pixels takes one launch; the
-#: scratch takes 17 MB for k = 7.
-CHUNK_ROWS, CHUNK_COLUMNS = 512, 1024
-
-
 @ti.data_oriented
-class _Stages:
-    """The sort and the merge of the ``size x size`` median in blocks of ``lanes_`` rows, as
-    one kernel (:meth:`run`) for every image size, over chunks of ``rows x columns`` pixels.
+class MedianFilter:
+    """The ``size x size`` median of ``(H, W)`` planes (``size`` odd; 1 is a copy); owns the
+    sorted window columns and the medians of a block of rows, as lane vectors."""
 
-    The kernel reads the image from a flat ndarray and its size from its arguments; its
-    scratch, the sorted window columns and the medians of a chunk, are fields of a fixed shape
-    in a tree of their own, kept while the Taichi runtime lives (destroying a tree makes
-    Taichi drop every compiled kernel).  One instance per window size, lane count and chunk
-    serves every :class:`MedianFilter` of a runtime (:func:`_stages`)."""
-
-    def __init__(self, size, lanes_, rows, columns):
-        self.median_size, self.lanes = size, lanes_
-        self.runtime = ti.lang.impl.get_runtime()
-        self._network = median_network(size)
-        k, tile = size, self._network[1]
-        self.chunk_columns = columns
-        self.row_blocks, self.tiles = rows // lanes_, columns // tile
-        # the sorted window columns in blocks of ``lanes`` rows (rank r of row
-        # ``yb lanes + l`` at r * lanes + l), every column of the chunk's tiles and ``k // 2``
-        # reflected columns on either side: the merge runs in SIMD lanes over the rows of a
-        # block and reads a tile's columns at compile-time offsets, unreflected
-        self._sorted = ti.Vector.field(k * lanes_, ti.f32)
-        # the medians of a block's rows, stored whole: LLVM packs the tree's comparators
-        # into SIMD lanes only from stores of whole vectors (scalar stores into the
-        # output's rows left them scalar, 9.4 ms against 8.3 for the tile of one row)
-        self.medians = ti.Vector.field(lanes_, ti.f32)
-        builder = ti.FieldsBuilder()
-        builder.dense(ti.ij, (self.row_blocks, columns + 2 * (k // 2))).place(
-            self._sorted, offset=(0, -(k // 2)))
-        builder.dense(ti.ij, (self.row_blocks, columns)).place(self.medians)
-        builder.finalize()
+    def __init__(self, pool, height, width, size):
+        self.H, self.W = int(height), int(width)
+        self.median_size = int(size)
+        self.lanes = lanes.lanes_for_arch()
+        if self.median_size > 1:
+            self._network = median_network(self.median_size)
+            # the sorted window columns in blocks of ``lanes`` rows (rank r of row
+            # ``yb lanes + l`` at r * lanes + l), every column of the tiles and ``k // 2``
+            # reflected columns on either side: the merge runs in SIMD lanes over the rows
+            # of a block and reads a tile's columns at compile-time offsets, unreflected
+            tile, k = self._network[1], self.median_size
+            self._row_blocks = lanes.block_count(self.H, self.lanes)
+            self._tiles = lanes.block_count(self.W, tile)
+            self._sorted = pool.vector(k * self.lanes, ti.f32,
+                                       (self._row_blocks, self._tiles * tile + 2 * (k // 2)),
+                                       offset=(0, -(k // 2)))
+            # the medians of a block's rows, stored whole: LLVM packs the tree's comparators
+            # into SIMD lanes only from stores of whole vectors (scalar stores into the
+            # output's rows left them scalar, 9.4 ms against 8.3 for the tile of one row)
+            self._medians = pool.vector(self.lanes, ti.f32,
+                                        (self._row_blocks, self._tiles * tile))
 
     @ti.func
     def _apply(self, v: ti.template(), ops: ti.template()):
@@ -276,35 +252,23 @@ class _Stages:
                     v[b] = hi
 
     @ti.func
-    def _sort_columns(self, plane: ti.template(), H, W, yb0, x0, n_blocks, n_columns):
-        """Stage 1 of the median: every window column (symmetric borders) of the chunk whose
-        first block of rows is ``yb0`` and first column ``x0``, sorted, for a block of
-        ``lanes`` rows at a time in SIMD lanes, the margin columns included.  ``plane`` holds
-        the ``(H, W)`` image row by row.  The networks are attributes read with
-        ``ti.static``, not kernel arguments: Taichi hashes every template argument at each
-        launch, which for these tuples of a few hundred comparators cost more than the
-        kernel itself."""
+    def _sort_columns(self, src: ti.template()):
+        """Stage 1 of the median: every window column (symmetric borders), sorted, for a
+        block of ``lanes`` rows at a time in SIMD lanes, the margin columns included.
+        The networks are attributes read with ``ti.static``, not kernel arguments: Taichi
+        hashes every template argument at each launch, which for these tuples of a few
+        hundred comparators cost more than the kernel itself."""
         k, L = ti.static(self.median_size, self.lanes)
         column_ops = ti.static(self._network[0])
-        # over the chunk's whole width, idle past the image's: the loop index splits by a
-        # constant, not by a runtime divisor
-        for yb, i in ti.ndrange(n_blocks, ti.static(self.chunk_columns + 2 * (k // 2))):
-            if i < n_columns + 2 * (k // 2):
-                xs = reflect(x0 + i - k // 2, W)
-                # the rows of the block's windows: k - 1 more than the block
-                top = (yb0 + yb) * L - k // 2
-                window = ti.Vector.zero(ti.f32, L + k - 1)
-                if top >= 0 and top + L + k - 1 <= H:          # no row to reflect
-                    for r in ti.static(range(L + k - 1)):
-                        window[r] = plane[(top + r) * W + xs]
-                else:
-                    for r in ti.static(range(L + k - 1)):
-                        window[r] = plane[reflect(top + r, H) * W + xs]
-                v = [lanes.take(window, r, L) for r in ti.static(range(k))]
-                self._apply(v, column_ops)
-                self._sorted[yb, i - k // 2] = ti.Vector([v[r][lane]
-                                                          for r in ti.static(range(k))
-                                                          for lane in ti.static(range(L))])
+        for yb, x in self._sorted:
+            xs = reflect(x, self.W)
+            # the rows of the block's windows: k - 1 more than the block
+            window = [src[reflect(yb * L + i - k // 2, self.H), xs]
+                      for i in ti.static(range(L + k - 1))]
+            v = [lanes.take(window, r, L) for r in ti.static(range(k))]
+            self._apply(v, column_ops)
+            self._sorted[yb, x] = ti.Vector([v[r][lane] for r in ti.static(range(k))
+                                             for lane in ti.static(range(L))])
 
     @ti.func
     def _column(self, yb, t, c: ti.template()):
@@ -340,7 +304,7 @@ class _Stages:
         v = self._load(slots, [held, self._one_run(columns, pre)])
         self._apply(v, ops)
         if ti.static(output >= 0):
-            self.medians[yb, t * ti.static(self._network[1]) + output] = v[ti.static(keep[0])]
+            self._medians[yb, t * ti.static(self._network[1]) + output] = v[ti.static(keep[0])]
         else:
             kept = self._gather(v, keep)
             for child in ti.static(children):
@@ -362,109 +326,40 @@ class _Stages:
         return [v[i] for i in ti.static(positions)]
 
     @ti.func
-    def _median_of_columns(self, n_blocks, n_tiles):
+    def _median_of_columns(self):
         """Stage 2: the medians of a tile of horizontally adjacent windows from the sorted
         columns, through the tree of :func:`median_network`, for a block of rows at a time."""
-        root = ti.static(self._network[2])
+        tile, root = ti.static(self._network[1:])
         columns_at, slots, ops, keep, children = ti.static(
             (root[0], root[2], root[3], root[4], root[5]))
-        for yb, t in ti.ndrange(n_blocks, ti.static(self.tiles)):     # as stage 1's loop
-            if t < n_tiles:
-                columns = [self._column(yb, t, c) for c in ti.static(columns_at)]
-                v = self._load(slots, columns)
-                self._apply(v, ops)
-                kept = self._gather(v, keep)
-                for child in ti.static(children):
-                    self._descend(yb, t, kept, child)
+        for yb, t in ti.ndrange(self._row_blocks, self._tiles):
+            columns = [self._column(yb, t, c) for c in ti.static(columns_at)]
+            v = self._load(slots, columns)
+            self._apply(v, ops)
+            kept = self._gather(v, keep)
+            for child in ti.static(children):
+                self._descend(yb, t, kept, child)
 
-    @ti.kernel
-    def run(self, plane: ti.types.ndarray(dtype=ti.f32, ndim=1), height: ti.i32,
-            width: ti.i32, yb0: ti.i32, x0: ti.i32, n_blocks: ti.i32, n_tiles: ti.i32):
-        """:attr:`medians` of a chunk of the ``(height, width)`` image in ``plane`` (row by
-        row): ``n_blocks`` blocks of rows from block ``yb0``, ``n_tiles`` tiles from column
-        ``x0``; ``medians[yb, i]`` holds pixels ``(yb0 + yb) lanes + l``, ``x0 + i``."""
-        self._sort_columns(plane, height, width, yb0, x0, n_blocks,
-                           n_tiles * ti.static(self._network[1]))
-        self._median_of_columns(n_blocks, n_tiles)
-
-
-#: The :class:`_Stages` made so far, by window size, lanes and chunk.
-_SHARED = {}
-
-
-def _stages(size, lanes_):
-    """The :class:`_Stages` of the current Taichi runtime for ``size``, ``lanes_`` and the
-    chunk ``CHUNK_ROWS x CHUNK_COLUMNS`` (made again after ``ti.init``, which frees every
-    field)."""
-    key = (size, lanes_, CHUNK_ROWS, CHUNK_COLUMNS)
-    stages = _SHARED.get(key)
-    if stages is None or stages.runtime is not ti.lang.impl.get_runtime():
-        stages = _SHARED[key] = _Stages(*key)
-    return stages
-
-
-@ti.data_oriented
-class MedianFilter:
-    """The ``size x size`` median of ``(H, W)`` planes (``size`` odd; 1 is a copy); owns the
-    copy of the plane that the shared kernel reads (:func:`_stages`), a flat ndarray that
-    goes with the filter (``pool`` holds nothing of it)."""
-
-    def __init__(self, pool, height, width, size):
-        self.H, self.W = int(height), int(width)
-        self.median_size = int(size)
-        self.lanes = lanes.lanes_for_arch()
-        if self.median_size > 1:
-            self._stages = _stages(self.median_size, self.lanes)
-            tile = self._stages._network[1]
-            row_blocks = lanes.block_count(self.H, self.lanes)
-            tiles = lanes.block_count(self.W, tile)
-            self._plane = ti.ndarray(ti.f32, (self.H * self.W,))
-            # the chunks, one launch each: first block of rows, first column, blocks, tiles
-            step_blocks, step_tiles = self._stages.row_blocks, self._stages.tiles
-            self._chunks = [(yb0, t0 * tile, min(step_blocks, row_blocks - yb0),
-                             min(step_tiles, tiles - t0))
-                            for yb0 in range(0, row_blocks, step_blocks)
-                            for t0 in range(0, tiles, step_tiles)]
-
-    @ti.kernel
-    def _copy(self, src: ti.template(), sink: ti.template()):
-        """The median of size 1: ``src`` itself, into the sink."""
-        sink.begin()
-        for y, x in src:
-            sink.store(y, x, src[y, x])
-
-    @ti.kernel
-    def _load_plane(self, src: ti.template(), plane: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                    sink: ti.template()):
-        """``sink.begin()``, and ``src`` into ``plane`` row by row: all of it before the
-        first median is stored, for a sink may write into ``src``."""
-        sink.begin()
-        for y, x in src:
-            plane[y * self.W + x] = src[y, x]
-
-    @ti.kernel
-    def _store_medians(self, sink: ti.template(), yb0: ti.i32, x0: ti.i32, n_blocks: ti.i32):
-        """The medians of a chunk (see :meth:`_Stages.run`), pixel by pixel, into the sink."""
-        L, medians = ti.static(self.lanes, self._stages.medians)
-        for yb, i in ti.ndrange(n_blocks, ti.static(min(self._stages.chunk_columns, self.W))):
-            if x0 + i < self.W:
-                block = medians[yb, i]
-                # a test per row even in whole blocks: without the tests LLVM packed the
-                # sink's arithmetic into SIMD lanes, and Eq. 3's D came out other in the
-                # last bit
-                for lane in ti.static(range(L)):
-                    y = (yb0 + yb) * L + lane
+    @ti.func
+    def _store_medians(self, sink: ti.template()):
+        """Stage 3: the medians of every block of rows, pixel by pixel, into the sink."""
+        for yb, x in self._medians:
+            if x < self.W:
+                medians = self._medians[yb, x]
+                for lane in ti.static(range(self.lanes)):
+                    y = yb * ti.static(self.lanes) + lane
                     if y < self.H:
-                        sink.store(y, x0 + i, block[lane])
+                        sink.store(y, x, medians[lane])
 
-    def run(self, src, sink):
+    @ti.kernel
+    def run(self, src: ti.template(), sink: ti.template()):
         """``sink.store(y, x, m)`` for every pixel, ``m`` the median of ``src`` (an ``(H, W)``
-        plane) over the window centred there, symmetric borders.  ``src`` is copied into the
-        ndarray, then the shared kernel and the store into the sink run once per chunk."""
-        if self.median_size == 1:
-            self._copy(src, sink)
-            return
-        self._load_plane(src, self._plane, sink)
-        for yb0, x0, n_blocks, n_tiles in self._chunks:
-            self._stages.run(self._plane, self.H, self.W, yb0, x0, n_blocks, n_tiles)
-            self._store_medians(sink, yb0, x0, n_blocks)
+        plane) over the window centred there, symmetric borders.  One launch."""
+        sink.begin()
+        if ti.static(self.median_size == 1):
+            for y, x in src:
+                sink.store(y, x, src[y, x])
+        else:
+            self._sort_columns(src)
+            self._median_of_columns()
+            self._store_medians(sink)

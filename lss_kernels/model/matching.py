@@ -17,12 +17,6 @@ frame; image coordinates clamped at the borders).  Two costs:
 
 Either way the hierarchy min-max normalises each level's patch means, so only the shape of
 M matters.
-
-The census transform runs once per view (:meth:`MatchingCost.setup`), in a kernel over
-ndarrays (:func:`_census`): Taichi compiles a kernel again for every shape of the fields it
-reads, not for the shape of an ndarray, so the 48 comparisons a pixel compile once per process
-(and come from Taichi's offline cache in the next) whatever the image size; only the copies of
-the image in and of the words out, a loop each, compile per size.
 """
 import taichi as ti
 
@@ -38,40 +32,6 @@ _RADIUS = 3
 #: rho's scales (Mei et al.'s 10 / 255 for AD; 30 of 63 bits, as a fraction, for census).
 _LAMBDA_AD = 10.0 / 255.0
 _LAMBDA_CENSUS = 30.0 / 63.0
-
-
-#: A pixel's census: 48 bits in two words.
-_WORDS = ti.types.vector(2, ti.u32)
-
-
-@ti.kernel
-def _census(img: ti.types.ndarray(dtype=ti.math.vec3, ndim=2),
-            grey: ti.types.ndarray(dtype=ti.f32, ndim=2),
-            out: ti.types.ndarray(dtype=_WORDS, ndim=2)):
-    """The census transform of the RGB image ``img`` into ``out`` (``grey``: scratch of the
-    same shape), for any shape.  Each pixel's grey is computed once, then compared: the same
-    colour is the same grey, never below the centre, as in the specification
-    (:func:`lss_kernels.reference.kernels.census`).  A grey computed at every use, as a
-    neighbour and as the centre, may be summed in other orders by LLVM's fast-math
-    reassociation, and a neighbour of the centre's own colour could then count as below it."""
-    H, W = img.shape[0], img.shape[1]
-    for y, x in ti.ndrange(H, W):
-        p = img[y, x]
-        grey[y, x] = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
-    for y, x in ti.ndrange(H, W):
-        centre = grey[y, x]
-        words = ti.Vector([ti.u32(0), ti.u32(0)])
-        bit = 0
-        for dy, dx in ti.static(ti.ndrange((-_RADIUS, _RADIUS + 1), (-_RADIUS, _RADIUS + 1))):
-            if ti.static(dy != 0 or dx != 0):
-                # image coordinates clamped: a neighbour clamped onto the centre is the
-                # centre, not below it
-                ny = ti.min(ti.max(y + dy, 0), H - 1)
-                nx = ti.min(ti.max(x + dx, 0), W - 1)
-                if grey[ny, nx] < centre:
-                    words[bit // 32] |= ti.u32(1) << ti.u32(bit % 32)
-                bit += 1
-        out[y, x] = words
 
 
 @ti.data_oriented
@@ -95,30 +55,34 @@ class MatchingCost:
             shape = (self.H, self.W)
             self.census_left = pool.vector(2, ti.u32, shape)
             self.census_right = pool.vector(2, ti.u32, shape)
+            self.grey = pool.field(ti.f32, shape)
 
     @ti.kernel
-    def _load_image(self, img: ti.template(), image: ti.types.ndarray(dtype=ti.math.vec3,
-                                                                      ndim=2)):
-        """``img`` into the ndarray that :func:`_census` reads."""
+    def _transform(self, img: ti.template(), out: ti.template()):
+        """The census transform of ``img`` into ``out``.  Each pixel's grey is computed once,
+        then compared: the same colour is the same grey, never below the centre, as in the
+        specification (:func:`lss_kernels.reference.kernels.census`).  A grey computed at
+        every use, as a neighbour and as the centre, may be summed in other orders by LLVM's
+        fast-math reassociation, and a neighbour of the centre's own colour could then count
+        as below it."""
         for y, x in img:
-            image[y, x] = img[y, x]
-
-    @ti.kernel
-    def _store_words(self, words: ti.types.ndarray(dtype=_WORDS, ndim=2),
-                     out: ti.template()):
-        """:func:`_census`'s words into a census field."""
+            p = img[y, x]
+            self.grey[y, x] = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
         for y, x in out:
-            out[y, x] = words[y, x]
-
-    def _transform(self, img, out):
-        """The census transform of ``img`` (an ``(H, W)`` RGB vector field) into ``out``,
-        through :func:`_census` and ndarrays held for the call only."""
-        image = ti.Vector.ndarray(3, ti.f32, (self.H, self.W))
-        grey = ti.ndarray(ti.f32, (self.H, self.W))
-        words = ti.Vector.ndarray(2, ti.u32, (self.H, self.W))
-        self._load_image(img, image)
-        _census(image, grey, words)
-        self._store_words(words, out)
+            centre = self.grey[y, x]
+            words = ti.Vector([ti.u32(0), ti.u32(0)])
+            bit = 0
+            for dy, dx in ti.static(ti.ndrange((-_RADIUS, _RADIUS + 1),
+                                               (-_RADIUS, _RADIUS + 1))):
+                if ti.static(dy != 0 or dx != 0):
+                    # image coordinates clamped: a neighbour clamped onto the centre is the
+                    # centre, not below it
+                    ny = ti.min(ti.max(y + dy, 0), self.H - 1)
+                    nx = ti.min(ti.max(x + dx, 0), self.W - 1)
+                    if self.grey[ny, nx] < centre:
+                        words[bit // 32] |= ti.u32(1) << ti.u32(bit % 32)
+                    bit += 1
+            out[y, x] = words
 
     def setup(self, left, right):
         """The census transforms of both views (``left``, ``right``: ``(H, W)`` RGB vector
