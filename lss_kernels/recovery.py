@@ -147,7 +147,8 @@ def with_recovery(run, params, d_max, left=None):
     The first solve uses ``params`` and the second ``params`` changed by ``RECOVERY``; when
     ``left`` (the left image, anything :func:`lss_kernels.io.read_image` reads) is
     periodic over at least ``PERIODIC_AREA`` of its tiles, the first uses ``params``
-    changed by ``PERIODIC`` and the second ``params``.  ``params``
+    changed by ``PERIODIC`` and the second ``params`` (at once, without a retry, when the
+    first finds no initial region: :class:`~lss_kernels.model.init.InitError`).  ``params``
     None: the defaults; ``d_max``: the searched range (left-view pixels)."""
     from .params import Params
     params = Params() if params is None else params
@@ -160,7 +161,16 @@ def with_recovery(run, params, d_max, left=None):
         if fraction >= PERIODIC_AREA:
             first_params, second_params = params.replace(**PERIODIC), params
             record["first_params"] = dict(PERIODIC)
-    result, extra = run(first_params)
+    try:
+        result, extra = run(first_params)
+    except InitError as error:
+        if first_params == params:
+            raise
+        # a start from the first consensus (auto, a point) found nothing with the
+        # periodic parameters, whose ambiguous patches send no message: the given ones
+        record.update(first_error=str(error))
+        first_params = second_params
+        result, extra = run(first_params)
     first = model_health(result, d_max)
     reason = collapse(first)
     record.update(health=first, collapse=reason, retried=False)

@@ -243,3 +243,27 @@ def test_cli_one_line_errors(dataset, tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err
     assert err == f"lss eval: error: {OPENCV_MISSING}\n"
     assert not (tmp_path / "runs").exists()
+
+
+def test_a_scene_without_a_start_scores_as_no_answer_and_the_run_goes_on(dataset, tmp_path,
+                                                                         ti_arch):
+    """``--init auto`` on a textureless pair finds no object: that scene is recorded with
+    its error, scored as an unknown map (F1 0, bad-4.0 100 %), and the other is solved."""
+    import numpy as np
+
+    from lss_kernels.io import load_scene, read_pfm
+    root = tmp_path / "data"
+    flat = make_scene("tiny", seed=5)
+    flat.left[:] = 0.5
+    flat.right[:] = 0.5
+    save_scene(root / "flat", flat)
+    save_scene(root / "textured", load_scene(dataset / "sceneB"))
+    rows = run_eval(root, methods=("lss",), out=tmp_path / "out", jobs=1, arch=ti_arch,
+                    params=FAST, progress=False, init="auto")
+    by_scene = {r["scene"]: r for r in rows}
+    failed = by_scene["flat"]
+    assert "no foreground found" in failed["error"] and failed["iterations"] == 0
+    assert failed["occ_f1"] == 0.0 and failed["bad4"] == 100.0
+    assert "error" not in by_scene["textured"] and by_scene["textured"]["iterations"] > 0
+    assert (tmp_path / "out" / "panels" / "flat.png").exists()
+    assert np.isinf(read_pfm(tmp_path / "out" / "runs" / "flat" / "lss" / "disparity.pfm")).all()

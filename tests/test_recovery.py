@@ -254,3 +254,29 @@ def test_lss_solve_says_it_recovered(ti_arch, tmp_path, capsys):
     assert summary["recovery"].get("kept") == "retry", summary["recovery"]
     assert "the first model collapsed" in printed and "kept the second model" in printed
     assert summary["score"]["occ_f1"] > 0.9
+
+
+def test_a_periodic_start_that_finds_nothing_falls_back_to_the_given_params():
+    """With the periodic parameters the first consensus may hold no confident match under a
+    point; the pair is then solved with the given parameters, once."""
+    from lss_kernels.model.init import InitError
+    calls = []
+
+    def run(params):
+        calls.append(params)
+        if params.message_ambiguity > 0:
+            raise InitError("init: no confident match near the point")
+        return model(jump=0.0), len(calls)
+    result, extra = with_recovery(run, Params(), D_MAX, left=stripes(6))
+    assert calls == [Params().replace(**recovery.PERIODIC), Params()]
+    assert "no confident match" in result.recovery["first_error"]
+    assert result.recovery["retried"] is False and extra == 2
+
+
+def test_an_init_error_without_a_periodic_switch_is_raised():
+    from lss_kernels.model.init import InitError
+
+    def run(params):
+        raise InitError("init auto: no foreground found")
+    with pytest.raises(InitError, match="no foreground found"):
+        with_recovery(run, Params(), D_MAX, left=np.random.default_rng(2).random((64, 160)))

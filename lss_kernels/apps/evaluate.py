@@ -147,12 +147,20 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False,
     """Disparity and occlusion (left view) of one method on one scene, extra facts, and the
     seconds spent on the trace."""
     if method == "lss":
+        from ..model.init import InitError
         from ..recovery import with_recovery
 
         def run(p):
             result, rows, spent = _solve(scene, p, trace, restart, init)
             return result, (rows, spent)
-        result, (rows, spent) = with_recovery(run, params, scene.d_max, scene.left)
+        try:
+            result, (rows, spent) = with_recovery(run, params, scene.d_max, scene.left)
+        except InitError as error:
+            # no start found (auto, a point): the scene scores as no answer, the run goes on
+            unknown = np.full(scene.left.shape[:2], np.inf, np.float32)
+            extra = {"iterations": 0, "stop_reason": f"no start: {error}", "error": str(error),
+                     "recovered": False, "periodic": False, "bad4_surface": 100.0}
+            return unknown, np.zeros(unknown.shape, bool), extra, 0.0
         extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason),
                  "recovered": result.recovery.get("kept") == "retry",
                  "periodic": "first_params" in result.recovery,
