@@ -104,14 +104,18 @@ def test_synthetic_pair_and_cli_registration():
     assert args.threads == [2, 1] and args.arch == "auto"      # every command: auto
 
 
-def _side_by_side():
+def _demo(name):
     import importlib.util
     from pathlib import Path
-    path = Path(__file__).resolve().parents[1] / "demos" / "side_by_side.py"
-    spec = importlib.util.spec_from_file_location("side_by_side", path)
+    path = Path(__file__).resolve().parents[1] / "demos" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def _side_by_side():
+    return _demo("side_by_side")
 
 
 def test_side_by_side_table_has_per_scene_ratios_and_medians():
@@ -137,3 +141,26 @@ def test_side_by_side_exports_a_commit_and_finds_its_entry_point(tmp_path):
     tree = sbs.export("HEAD", tmp_path)
     assert (tree / "lss_kernels" / "__init__.py").is_file()
     assert sbs.entry_point(tree) == ("lss_kernels.apps.cli", "main")
+
+
+def test_setup_time_runs_first_known_and_new_sizes_on_a_fresh_cache_each_repeat(tmp_path):
+    """The order of the processes and their caches, with a fake solve; the table's medians
+    and the difference new - known."""
+    st = _demo("setup_time")
+    calls = []
+    fake = {"a": [9.0, 3.0], "b": [5.0]}
+
+    def run(scene, out, cache, iterations):
+        calls.append((scene, cache.name, iterations))
+        seen = [c for c in calls if c[0] == scene and c[1] == cache.name]
+        return fake[scene][len(seen) - 1] + 0.1 * int(cache.name[-1])
+    times = st.measure(("a", "b"), tmp_path, 40, 3, run=run)
+    assert calls[:3] == [("a", "cache0", 40), ("a", "cache0", 40), ("b", "cache0", 40)]
+    assert [c[1] for c in calls] == ["cache0"] * 3 + ["cache1"] * 3 + ["cache2"] * 3
+    assert times["first"] == pytest.approx([9.0, 9.1, 9.2])
+    lines = st.table(times, ((320, 240), (328, 236)), 40).splitlines()
+    assert lines[2] == "| first size 320x240: every kernel compiled | 9.1 |"
+    assert lines[3] == "| the same size again: kernels loaded | 3.1 |"
+    assert lines[-1] == "| **a new size adds** | **2.0** |"
+    with pytest.raises(argparse.ArgumentTypeError, match="WIDTHxHEIGHT"):
+        st.parse_size("320")
