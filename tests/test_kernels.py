@@ -711,18 +711,6 @@ def test_median_filter_matches_numpy_with_ties_and_borders(ti_arch):
     np.testing.assert_array_equal(_median_of(a, 7), ref.median_filter(a, 7))
 
 
-@pytest.mark.parametrize("lanes", [8, 1])
-@pytest.mark.parametrize("k", [1, 3, 5, 7])
-@pytest.mark.parametrize("height, width", [(37, 53), (48, 64), (5, 9)])
-def test_median_filter_matches_numpy_off_the_blocks_and_tiles(ti_arch, monkeypatch, lanes, k,
-                                                              height, width):
-    """Sizes that end in partial blocks of rows and partial tiles (37 x 53), that end in
-    whole ones (48 x 64), and smaller than a window's reach (5 x 9)."""
-    rng = np.random.default_rng(height * width + k)
-    a = np.round(rng.standard_normal((height, width)) * 2).astype(np.float32)
-    np.testing.assert_array_equal(_median_of(a, k, lanes, monkeypatch), ref.median_filter(a, k))
-
-
 def _census_words(image):
     """:func:`lss_kernels.reference.kernels.census` packed as the kernel's two words."""
     bits = ref.census(image).astype(np.uint32)
