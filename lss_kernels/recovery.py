@@ -61,7 +61,7 @@ TILE = (16, 64)
 MAX_PERIOD = 32
 #: Half the rise of the autocorrelation back to a peak that makes a tile periodic.
 PERIODIC_SCORE = 0.6
-#: Fraction of periodic tiles from which a pair is solved with ``RECOVERY`` first.
+#: Fraction of periodic tiles from which a pair is solved with ``PERIODIC`` first.
 PERIODIC_AREA = 0.05
 
 
