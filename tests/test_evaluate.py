@@ -245,6 +245,7 @@ def test_cli_one_line_errors(dataset, tmp_path, capsys, monkeypatch):
     assert not (tmp_path / "runs").exists()
 
 
+@pytest.mark.slow
 def test_a_scene_without_a_start_scores_as_no_answer_and_the_run_goes_on(dataset, tmp_path,
                                                                          ti_arch):
     """``--init auto`` on a textureless pair finds no object: that scene is recorded with

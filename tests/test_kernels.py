@@ -720,7 +720,7 @@ def _census_words(image):
     return words
 
 
-@pytest.mark.parametrize("height, width", [(37, 53), (48, 64), (5, 9)])
+@pytest.mark.parametrize("height, width", [(37, 53), (5, 9)])
 def test_census_transform_matches_the_specification_bit_for_bit(ti_arch, height, width):
     """Colours in quarters: many neighbours of the centre's own colour (never below it),
     and no near-ties between the float32 greys and the reference's float64 ones."""
