@@ -143,6 +143,48 @@ def test_opening_and_widening_match_the_specification(region, radius):
     assert (labels[labels >= 0] == own[labels >= 0]).all()
 
 
+def test_background_fit_recovers_the_quadratic_under_an_object_and_stray_values():
+    from lss_kernels.model.init import _basis, background_fit
+    H, W = 60, 80
+    y, x = np.mgrid[0:H, 0:W]
+    want = np.array([-6.0, 1.0, 2.0, 3.0, -4.0, 10.0])        # on the normalised basis
+    d = (_basis(x, y, H, W) @ want).astype(np.float32)
+    d[20:40, 30:55] += 8.0                                    # the object, in front
+    rng = np.random.default_rng(3)
+    stray = rng.random((H, W)) < 0.05
+    d[stray] = rng.uniform(0, 30, stray.sum())
+    d[rng.random((H, W)) < 0.05] = -1.0                       # no match
+    got, facts = background_fit(d)
+    np.testing.assert_allclose(got, want, atol=0.1)            # strays within the band stay
+    assert 0.8 < facts["inliers"] < 0.95                      # object and strays are out
+    plain = np.linalg.lstsq(_basis(x, y, H, W)[d >= 0], d[d >= 0], rcond=None)[0]
+    assert np.abs(plain - want).max() > 0.5                   # a plain fit is pulled away
+    assert background_fit(np.full((4, 4), -1.0, np.float32))[0] is None
+    noisy = (_basis(x, y, H, W) @ want + rng.normal(0, 4.0, (H, W))).astype(np.float32)
+    got, facts = background_fit(noisy)                        # noisier than the band:
+    assert facts["band"] > 3.0 and facts["inliers"] > 0.9     # it widens with the spread
+    np.testing.assert_allclose(got, want, atol=1.5)
+
+
+def test_keep_above_drops_near_pixels_on_a_background_hump(region):
+    """A background that bulges towards the camera in the middle of each row is near by the
+    row test; above its own quadratic only the object is."""
+    from lss_kernels.model.init import _basis, background_fit
+    y, x = np.mgrid[0:24, 0:40]
+    d = (6.0 - 0.02 * (x - 20.0) ** 2).astype(np.float32)
+    d[4:10, 28:36] += 4.0
+    region.d.from_numpy(d)
+    region.mark_near(20, 1.0)
+    near = region.label.to_numpy() >= 0
+    assert near[:, 18:22].all()                               # the hump's crest
+    c, _ = background_fit(d)
+    region.keep_above(c.astype(np.float32), 1.0)
+    got = region.label.to_numpy() >= 0
+    above = d - (_basis(x, y, 24, 40) @ c) > 1.0
+    np.testing.assert_array_equal(got, near & above)
+    assert got[4:10, 28:33].all() and not got[:, 18:22].any()
+
+
 def test_a_point_grows_over_near_pixels_only(region):
     """Seed on a near block standing on a ramp at the block's depth: the region stays on the
     block (the band alone would run along the ramp)."""

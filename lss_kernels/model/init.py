@@ -19,10 +19,14 @@ and removes stray matches.  Then:
 * ``Box(x0, y0, x1, y1)``: the ellipse inscribed in the box (``BOX_SPILL``; on the paper's
   scenes with the true boxes, mean F1 0.739, against 0.645 when the box's near pixels,
   widened by ``SPILL``, were joined to it);
-* ``"auto"``: the near pixels, opened by an ``OPENING`` square (thin ridges and specks go);
-  their 4-connected components are the candidates, and the one with the largest
-  ``area * (1 - 1.5 r)^2`` (``r`` = its centroid's distance from the image centre, as a
-  fraction of the half-diagonal) is the object: the largest near region closest to the centre.
+* ``"auto"``: the near pixels that also stand more than ``CONTRAST`` above the background
+  surface, a quadratic fitted to d-bar robustly (:func:`background_fit`, a stand-in for
+  the model's Theta_2 before the object is known): a floor or a wall whose depth bulges
+  along the rows is near by the row test but not above its own fit.  They are opened by an
+  ``OPENING`` square (thin ridges and specks go); their 4-connected components are the
+  candidates, and the one with the largest ``area * (1 - 1.5 r)^2`` (``r`` = its
+  centroid's distance from the image centre, as a fraction of the half-diagonal) is the
+  object: the largest near region closest to the centre.
 
 A region found by a point or ``auto`` starts phi widened by ``SPILL`` pixels: a start that
 spills over the object is recovered by the evolution, one that covers only part of it is not.
@@ -36,7 +40,8 @@ import taichi as ti
 
 from ..kernels.median import Assign, MedianFilter
 
-__all__ = ["Point", "Box", "AUTO", "InitialRegion", "InitError", "BOX_SPILL", "shift_columns"]
+__all__ = ["Point", "Box", "AUTO", "InitialRegion", "InitError", "BOX_SPILL", "background_fit",
+           "shift_columns"]
 
 AUTO = "auto"
 BOX_SPILL = 1.0          # a box's ellipse radii over the box's half sides
@@ -46,6 +51,11 @@ WINDOW = 0.5             # row window L of the contrast, fraction of the width
 BAND = 0.06              # a point's depth band, fraction of the seed's d-bar
 BAND_MIN = 1.0           # ... at least, cyclopean pixels
 OPENING = 5              # auto: side of the square that opens the near pixels, pixels
+BACKGROUND_BAND = 3.0    # auto: inliers of the background's robust fit, cyclopean pixels,
+SPREAD = 2.5             # ... or this many robust deviations (MAD) of its inliers if wider
+REGROW = 8               # ... and grows back over near pixels this far, pixels
+FIT_ROUNDS = 6           # ... rounds of the fit
+FIT_SAMPLES = 20000      # ... at most this many pixels (a regular subsample) enter it
 SPILL = 6                # a found region's widening, pixels
 MIN_AREA = 0.005         # smallest candidate region, fraction of the image
 MAX_ROUNDS = 4096        # propagation launches before a region is taken as it stands
@@ -97,6 +107,40 @@ def pick_region(labels: np.ndarray, min_area: int):
              "rule": "largest area * (1 - 1.5 r)^2, r = distance from the image centre / "
                      "half-diagonal"}
     return labels == ids[best], facts
+
+
+def _basis(x, y, H: int, W: int) -> np.ndarray:
+    """``(x^2, xy, y^2, x, y, 1)`` of the normalised coordinates ``x / W - 1/2``,
+    ``y / H - 1/2`` (float64, the last axis)."""
+    xn, yn = np.asarray(x, np.float64) / W - 0.5, np.asarray(y, np.float64) / H - 0.5
+    return np.stack([xn * xn, xn * yn, yn * yn, xn, yn, np.ones_like(xn)], axis=-1)
+
+
+def background_fit(d: np.ndarray, band: float = BACKGROUND_BAND, rounds: int = FIT_ROUNDS,
+                   samples: int = FIT_SAMPLES):
+    """A quadratic fitted to the background of ``d`` (an ``(H, W)`` map, negative = no
+    value) robustly: least squares over every value, then ``rounds`` times over the values
+    within ``band`` of the last fit (an object in front, or stray matches, drop out).
+    The band widens to ``SPREAD`` robust standard deviations (1.4826 times the median
+    absolute residual) of the last inliers where d-bar is noisier than ``band``.  Returns
+    ``(coefficients on _basis, facts)``, or ``(None, facts)`` with fewer than 6 values."""
+    H, W = d.shape
+    ys, xs = np.nonzero(d >= 0)
+    if xs.size < 6:
+        return None, {"values": int(xs.size)}
+    step = max(1, xs.size // samples)
+    ys, xs = ys[::step], xs[::step]
+    basis, value = _basis(xs, ys, H, W), d[ys, xs].astype(np.float64)
+    inliers = np.ones(value.shape, bool)
+    for _ in range(rounds + 1):
+        if inliers.sum() < 6:
+            break
+        coefficients = np.linalg.lstsq(basis[inliers], value[inliers], rcond=None)[0]
+        residual = np.abs(value - basis @ coefficients)
+        width = max(band, SPREAD * 1.4826 * float(np.median(residual[inliers])))
+        inliers = residual <= width
+    return coefficients, {"values": int(value.size), "inliers": float(inliers.mean()),
+                          "band": width}
 
 
 def shift_columns(mask: np.ndarray, shift: float) -> np.ndarray:
@@ -161,6 +205,18 @@ class InitialRegion:
             self.label[y, x] = -1
             if d >= 0 and ground < 1e8 and d - ground > contrast:
                 self.label[y, x] = y * self.W + x
+
+    @ti.kernel
+    def keep_above(self, c: ti.types.vector(6, ti.f32), contrast: ti.f32):
+        """Labelled pixels whose d-bar is not ``contrast`` above the quadratic ``c``
+        (:func:`background_fit`) lose their label."""
+        for y, x in self.label:
+            xn = (ti.cast(x, ti.f32) / self.W) - 0.5
+            yn = (ti.cast(y, ti.f32) / self.H) - 0.5
+            ground = c[0] * xn * xn + c[1] * xn * yn + c[2] * yn * yn + c[3] * xn \
+                + c[4] * yn + c[5]
+            if self.label[y, x] >= 0 and self.d[y, x] - ground <= contrast:
+                self.label[y, x] = -1
 
     @ti.kernel
     def propagate(self):
@@ -294,15 +350,26 @@ class InitialRegion:
 
     def _auto(self):
         H, W = self.H, self.W
+        near = self.label.to_numpy() >= 0
+        background, fit = background_fit(self.d.to_numpy())
+        if background is not None:
+            self.keep_above(background.astype(np.float32), CONTRAST)
         self.erode(OPENING // 2)
         self.dilate(OPENING // 2)
         rounds = self.until_stable(self.propagate)
         mask, facts = pick_region(self.label.to_numpy(), int(MIN_AREA * H * W))
         self.info = {"kind": "auto", "contrast_px": 2.0 * CONTRAST, "window": int(WINDOW * W),
-                     "opening": OPENING, "rounds": rounds, "spill": SPILL, **facts}
+                     "background_fit": fit, "opening": OPENING, "rounds": rounds,
+                     "spill": SPILL, **facts}
         if mask is None:
             raise InitError("init auto: no foreground found (no region stands nearer than "
                             "its surroundings); give --init point:X,Y, box:X0,Y0,X1,Y1 or "
                             "an ellipse")
+        # the object's extent: its near pixels within REGROW of the pixels above the fit
+        # (where the object pulls the fit up, its rim is not above it)
+        self.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
+        self.erode(0)
+        self.dilate(REGROW)
+        mask = (self.label.to_numpy() >= 0) & near | mask
         self.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
         return self._widened()
