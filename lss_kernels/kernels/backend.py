@@ -193,6 +193,41 @@ def _zero_all(fields: ti.template()):
                 f[I] = ti.cast(0, f.dtype)
 
 
+#: The smallest side of a size bucket, pixels (see :func:`bucket_size`).
+BUCKET_MIN = 64
+
+
+def bucket_size(n: int) -> int:
+    """The side of the size bucket of an image side of ``n`` pixels: the smallest of 64, 96,
+    128, 192, 256, 384, 512, 768, 1024, 1536, 2048, 3072, ... (powers of two and 1.5 times
+    them, from :data:`BUCKET_MIN`) that holds ``n``.
+
+    Two buckets per octave: a side is rounded up by at most 1.5x (65 -> 96; an area by at
+    most 2.25x, about 1.4x on average), and 2000x1500 takes 2048x1536, 1.05x its area, where
+    the next power of two (2048x2048) would take 1.4x, and up to 4x at other sizes.  The
+    bucket fields are the median's sorted columns and medians (32 bytes a bucket pixel, one
+    set shared by a pool's 7x7 filters) and the census's greys and words (24 bytes for both
+    views): ~0.25 GB at 2000x1500, against a solver's 4.8 GiB there with d_max 128.  Every
+    bucket side is a multiple of 32: whole blocks of 8 lanes and tiles of 4 windows.
+    """
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"bucket_size: expected a positive side, got {n}")
+    size = BUCKET_MIN
+    while True:
+        if n <= size:
+            return size
+        if n <= size * 3 // 2:
+            return size * 3 // 2
+        size *= 2
+
+
+def bucket_shape(height: int, width: int) -> tuple:
+    """``(bucket_size(height), bucket_size(width))``: the shape of the bucket-tree planes of
+    an ``height x width`` image (see :class:`FieldPool`)."""
+    return bucket_size(height), bucket_size(width)
+
+
 class FieldPool:
     """Allocates fields in SNode trees that can be freed as a whole.
 
@@ -201,26 +236,54 @@ class FieldPool:
     and the owner calls :meth:`finalize` once everything is declared and :meth:`destroy` when
     done.  Fields cannot be read or written before :meth:`finalize`.
 
-    Two trees: the fields whose shape depends on the disparity range (``volume=True``: the
-    cost volumes) and the rest, finalised first.  Taichi's offline cache keys a kernel on
-    every tree it touches (shapes and SNode ids), so kernels that touch no volume -- the
-    median, phi's derivatives, the upward and downward passes, the fit -- compile once per
-    image size, whatever the disparity range, instead of once per (size, range).  The SNode
-    ids count the nodes declared before in the process, which do not depend on the range.
+    Three trees, because Taichi's offline cache keys a kernel on every tree it touches
+    (shapes and SNode ids):
+
+    * the fields whose shape depends on the image size only, finalised first;
+    * the fields whose shape depends on the disparity range (``volume=True``: the cost
+      volumes), so that kernels that touch no volume -- the median, phi's derivatives, the
+      upward and downward passes, the fit -- compile once per image size, whatever the
+      disparity range, instead of once per (size, range);
+    * the *bucket* fields (``bucket=True``), whose shapes are those of the image's size
+      bucket (:func:`bucket_shape`), so that kernels that touch only them and read the
+      image's size at run time from a field of that tree -- the median's tree of merge
+      networks, the census transform -- compile once per bucket instead of once per size.
+
+    The SNode ids count the nodes declared before in the process, which depend neither on
+    the range nor on the size.
     """
 
     def __init__(self):
         # created on first use: Taichi refuses to run while a builder is not finalised
-        self._builders = [None, None]
+        self._builders = [None, None, None]       # the size, volume and bucket trees
         self._trees = []
+        self._shared = {}
         self.nbytes = 0
         self.fields = []
 
-    def _place(self, f, shape, offset, nbytes, order=None, volume=False):
+    def shared(self, key, make):
+        """The object that ``make()`` returned when this pool was first asked for ``key``:
+        fields (and their kernels) that several users of the pool share, one after the other
+        -- scratch, such as the median's bucket fields, whose kernel then compiles once for
+        all of them.  Ask before :meth:`finalize`."""
+        if key not in self._shared:
+            self._shared[key] = make()
+        return self._shared[key]
+
+    @staticmethod
+    def _tree(volume, bucket):
+        """The index of the tree of a field (checked before Taichi creates the field: one
+        that is never placed stops every later kernel from compiling)."""
+        if volume and bucket:
+            raise ValueError("FieldPool: a field is in the volume tree or the bucket tree, "
+                             "not both")
+        return 2 if bucket else int(bool(volume))
+
+    def _place(self, f, shape, offset, nbytes, order, tree):
         shape = tuple(int(s) for s in shape)
-        if self._builders[int(volume)] is None:
-            self._builders[int(volume)] = ti.FieldsBuilder()
-        builder = self._builders[int(volume)]
+        if self._builders[tree] is None:
+            self._builders[tree] = ti.FieldsBuilder()
+        builder = self._builders[tree]
         if shape and order is not None:
             node = builder
             for axis in order:
@@ -238,14 +301,18 @@ class FieldPool:
         self.fields.append(f)
         return f
 
-    def field(self, dtype, shape, offset=None, order=None, volume=False):
+    def field(self, dtype, shape, offset=None, order=None, volume=False, bucket=False):
         """A scalar field; ``order``: its axes from the outermost to the innermost in memory
         (default: as indexed, the last axis innermost); ``volume``: its shape depends on the
-        disparity range (see the class)."""
-        return self._place(ti.field(dtype), shape, offset, _bytes(dtype), order, volume)
+        disparity range; ``bucket``: its shape is that of a size bucket (see the class)."""
+        tree = self._tree(volume, bucket)
+        return self._place(ti.field(dtype), shape, offset, _bytes(dtype), order, tree)
 
-    def vector(self, n, dtype, shape, offset=None):
-        return self._place(ti.Vector.field(n, dtype), shape, offset, n * _bytes(dtype))
+    def vector(self, n, dtype, shape, offset=None, bucket=False):
+        """A field of ``n``-vectors; ``bucket`` as for :meth:`field`."""
+        tree = self._tree(False, bucket)
+        return self._place(ti.Vector.field(n, dtype), shape, offset, n * _bytes(dtype), None,
+                           tree)
 
     def finalize(self):
         self._trees = [b.finalize() for b in self._builders if b is not None]
@@ -260,3 +327,12 @@ class FieldPool:
         for tree in self._trees:
             tree.destroy()
         self._trees = []
+        self._shared = {}
+        # Taichi lists the vector fields declared since its last kernel compile and reads
+        # their shapes at the next one: a pool destroyed before any kernel ran would leave
+        # freed SNodes in that list, and the next compile would crash the process
+        runtime = ti.lang.impl.get_runtime()
+        pending = getattr(runtime, "matrix_fields", None)
+        if pending:
+            mine = {id(f) for f in self.fields}
+            runtime.matrix_fields = [f for f in pending if id(f) not in mine]

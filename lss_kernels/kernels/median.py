@@ -9,6 +9,10 @@ sorting networks" (2021):
    the sorted columns the windows share only as far as the ranks that can still be a median
    (:func:`median_network`).
 
+The tree of stage 2 compiles once per *size bucket*
+(:func:`lss_kernels.kernels.backend.bucket_shape`), not once per image size, and once for
+all the filters of a pool with the same window: see :class:`MedianFilter`.
+
 The filter writes through a *sink*: any ``ti.data_oriented`` object with a ``ti.func``
 ``begin()`` (run once, serially, before the pixels) and a ``ti.func`` ``store(y, x, value)``
 (once per pixel); :class:`Assign` is the plain one.  Nothing here knows of the paper: the level
@@ -17,6 +21,7 @@ set hands it a sink that also counts sign flips and writes the disparity of Eq. 
 import taichi as ti
 
 from . import lanes
+from .backend import bucket_shape
 from .filters import reflect
 
 __all__ = ["Assign", "MedianFilter", "median_network"]
@@ -211,34 +216,41 @@ class Assign:
 
 
 @ti.data_oriented
-class MedianFilter:
-    """The ``size x size`` median of ``(H, W)`` planes (``size`` odd; 1 is a copy); owns the
-    sorted window columns and the medians of a block of rows, as lane vectors."""
+class _BucketTree:
+    """Stage 2 of :class:`MedianFilter` for a size bucket: the medians of a tile of
+    horizontally adjacent windows from the sorted window columns, through the tree of
+    :func:`median_network`, in :meth:`_bucket_median`.
 
-    def __init__(self, pool, height, width, size):
-        self.H, self.W = int(height), int(width)
-        self.median_size = int(size)
-        self.lanes = lanes.lanes_for_arch()
-        if self.median_size > 1:
-            self._network = median_network(self.median_size)
-            # the sorted window columns in blocks of ``lanes`` rows (rank r of row
-            # ``yb lanes + l`` at r * lanes + l), every column of the tiles and ``k // 2``
-            # reflected columns on either side: the merge runs in SIMD lanes over the rows
-            # of a block and reads a tile's columns at compile-time offsets, unreflected
-            tile, k = self._network[1], self.median_size
-            self._row_blocks = lanes.block_count(self.H, self.lanes)
-            self._tiles = lanes.block_count(self.W, tile)
-            self._sorted = pool.vector(k * self.lanes, ti.f32,
-                                       (self._row_blocks, self._tiles * tile + 2 * (k // 2)),
-                                       offset=(0, -(k // 2)))
-            # the medians of a block's rows, stored whole: LLVM packs the tree's comparators
-            # into SIMD lanes only from stores of whole vectors (scalar stores into the
-            # output's rows left them scalar, 9.4 ms against 8.3 for the tile of one row)
-            self._medians = pool.vector(self.lanes, ti.f32,
-                                        (self._row_blocks, self._tiles * tile))
+    Its fields are in the pool's bucket tree (see
+    :class:`lss_kernels.kernels.backend.FieldPool`): the plane's ``H`` and ``W``, the sorted
+    window columns and the medians of a block of rows, as lane vectors, each of the bucket's
+    shape.  The kernel touches only them and reads ``H`` and ``W`` at run time, so its code
+    and its offline-cache key are those of every size in the bucket.  The filters of a pool
+    with the same window and lanes share one (``pool.shared``): the solver's two 7x7 filters
+    compile the tree once.
+    """
+
+    def __init__(self, pool, bucket, size, lane_count):
+        self.median_size, self.lanes = int(size), int(lane_count)
+        self.network = median_network(self.median_size)
+        tile, k, L = self.network[1], self.median_size, self.lanes
+        blocks = lanes.block_count(bucket[0], L)
+        columns = lanes.block_count(bucket[1], tile) * tile
+        # H and W of the plane whose columns were sorted last (MedianFilter._sort)
+        self.size = pool.field(ti.i32, (2,), bucket=True)
+        # the sorted window columns in blocks of ``lanes`` rows (rank r of row
+        # ``yb lanes + l`` at r * lanes + l), every column of the tiles and ``k // 2``
+        # reflected columns on either side: the merge runs in SIMD lanes over the rows of a
+        # block and reads a tile's columns at compile-time offsets, unreflected
+        self.sorted = pool.vector(k * L, ti.f32, (blocks, columns + 2 * (k // 2)),
+                                  offset=(0, -(k // 2)), bucket=True)
+        # the medians of a block's rows, stored whole: LLVM packs the tree's comparators
+        # into SIMD lanes only from stores of whole vectors (scalar stores into the output's
+        # rows left them scalar, 9.4 ms against 8.3 for the tile of one row)
+        self.medians = pool.vector(L, ti.f32, (blocks, columns), bucket=True)
 
     @ti.func
-    def _apply(self, v: ti.template(), ops: ti.template()):
+    def apply(self, v: ti.template(), ops: ti.template()):
         """Run a network's ``ops`` on the local vector ``v``, in place."""
         for op, a, b, keep_min, keep_max in ti.static(ops):
             if ti.static(op == "swap"):
@@ -252,31 +264,12 @@ class MedianFilter:
                     v[b] = hi
 
     @ti.func
-    def _sort_columns(self, src: ti.template()):
-        """Stage 1 of the median: every window column (symmetric borders), sorted, for a
-        block of ``lanes`` rows at a time in SIMD lanes, the margin columns included.
-        The networks are attributes read with ``ti.static``, not kernel arguments: Taichi
-        hashes every template argument at each launch, which for these tuples of a few
-        hundred comparators cost more than the kernel itself."""
-        k, L = ti.static(self.median_size, self.lanes)
-        column_ops = ti.static(self._network[0])
-        for yb, x in self._sorted:
-            xs = reflect(x, self.W)
-            # the rows of the block's windows: k - 1 more than the block
-            window = [src[reflect(yb * L + i - k // 2, self.H), xs]
-                      for i in ti.static(range(L + k - 1))]
-            v = [lanes.take(window, r, L) for r in ti.static(range(k))]
-            self._apply(v, column_ops)
-            self._sorted[yb, x] = ti.Vector([v[r][lane] for r in ti.static(range(k))
-                                             for lane in ti.static(range(L))])
-
-    @ti.func
     def _column(self, yb, t, c: ti.template()):
         """The sorted column ``c`` (a compile-time offset, possibly negative) of the tile
         ``t``'s first window for the rows of block ``yb``: ``k`` ranks, each a vector over
         the rows."""
         k, L = ti.static(self.median_size, self.lanes)
-        ranks = self._sorted[yb, t * ti.static(self._network[1]) + c]
+        ranks = self.sorted[yb, t * ti.static(self.network[1]) + c]
         return [lanes.take(ranks, r * L, L) for r in ti.static(range(k))]
 
     @ti.func
@@ -302,9 +295,9 @@ class MedianFilter:
         columns_at, pre, slots, ops, keep, children, output = ti.static(node)
         columns = [self._column(yb, t, c) for c in ti.static(columns_at)]
         v = self._load(slots, [held, self._one_run(columns, pre)])
-        self._apply(v, ops)
+        self.apply(v, ops)
         if ti.static(output >= 0):
-            self._medians[yb, t * ti.static(self._network[1]) + output] = v[ti.static(keep[0])]
+            self.medians[yb, t * ti.static(self.network[1]) + output] = v[ti.static(keep[0])]
         else:
             kept = self._gather(v, keep)
             for child in ti.static(children):
@@ -317,7 +310,7 @@ class MedianFilter:
             return columns[0]
         else:
             v = self._load(pre[0], columns)
-            self._apply(v, pre[1])
+            self.apply(v, pre[1])
             return self._gather(v, pre[2])
 
     @ti.func
@@ -325,41 +318,103 @@ class MedianFilter:
         """The entries of ``v`` at ``positions``, as a new list."""
         return [v[i] for i in ti.static(positions)]
 
-    @ti.func
-    def _median_of_columns(self):
-        """Stage 2: the medians of a tile of horizontally adjacent windows from the sorted
-        columns, through the tree of :func:`median_network`, for a block of rows at a time."""
-        tile, root = ti.static(self._network[1:])
+    @ti.kernel
+    def _bucket_median(self):
+        """Stage 2 for the run-time ``H x W`` region only, a tile of windows of a block of
+        rows at a time.  Touches only bucket fields and reads nothing of the size at compile
+        time."""
+        L, tile, root = ti.static(self.lanes, self.network[1], self.network[2])
         columns_at, slots, ops, keep, children = ti.static(
             (root[0], root[2], root[3], root[4], root[5]))
-        for yb, t in ti.ndrange(self._row_blocks, self._tiles):
+        height, width = self.size[0], self.size[1]
+        for yb, t in ti.ndrange((height + L - 1) // L, (width + tile - 1) // tile):
             columns = [self._column(yb, t, c) for c in ti.static(columns_at)]
             v = self._load(slots, columns)
-            self._apply(v, ops)
+            self.apply(v, ops)
             kept = self._gather(v, keep)
             for child in ti.static(children):
                 self._descend(yb, t, kept, child)
 
+
+@ti.data_oriented
+class MedianFilter:
+    """The ``size x size`` median of ``(H, W)`` planes (``size`` odd; 1 is a copy).
+
+    Three kernels: :meth:`_sort` (stage 1: the sorted window columns, and the plane's size,
+    into the bucket fields of a :class:`_BucketTree`), the tree's ``_bucket_median`` (stage
+    2, the merge networks: seconds to compile for ``size`` 7, once per size bucket) and
+    :meth:`_store` (stage 3: the medians into the sink).  Only the first and the last, small,
+    compile once per image size.
+    """
+
+    def __init__(self, pool, height, width, size):
+        self.H, self.W = int(height), int(width)
+        self.median_size = int(size)
+        self.lanes = lanes.lanes_for_arch()
+        if self.median_size > 1:
+            self.bucket = bucket_shape(self.H, self.W)
+            key = ("median", self.median_size, self.lanes, self.bucket)
+            self._tree = pool.shared(key, lambda: _BucketTree(pool, self.bucket,
+                                                              self.median_size, self.lanes))
+            self._row_blocks = lanes.block_count(self.H, self.lanes)
+            self._tiles = lanes.block_count(self.W, self._tree.network[1])
+
     @ti.func
-    def _store_medians(self, sink: ti.template()):
-        """Stage 3: the medians of every block of rows, pixel by pixel, into the sink."""
-        for yb, x in self._medians:
-            if x < self.W:
-                medians = self._medians[yb, x]
-                for lane in ti.static(range(self.lanes)):
-                    y = yb * ti.static(self.lanes) + lane
-                    if y < self.H:
-                        sink.store(y, x, medians[lane])
+    def _sort_columns(self, src: ti.template()):
+        """Stage 1 of the median: every window column (symmetric borders), sorted, for a
+        block of ``lanes`` rows at a time in SIMD lanes, the margin columns included.
+        The networks are attributes read with ``ti.static``, not kernel arguments: Taichi
+        hashes every template argument at each launch, which for these tuples of a few
+        hundred comparators cost more than the kernel itself."""
+        k, L, tile = ti.static(self.median_size, self.lanes, self._tree.network[1])
+        column_ops = ti.static(self._tree.network[0])
+        for yb, x in ti.ndrange(self._row_blocks, (-(k // 2), self._tiles * tile + k // 2)):
+            xs = reflect(x, self.W)
+            # the rows of the block's windows: k - 1 more than the block
+            window = [src[reflect(yb * L + i - k // 2, self.H), xs]
+                      for i in ti.static(range(L + k - 1))]
+            v = [lanes.take(window, r, L) for r in ti.static(range(k))]
+            self._tree.apply(v, column_ops)
+            self._tree.sorted[yb, x] = ti.Vector([v[r][lane] for r in ti.static(range(k))
+                                                  for lane in ti.static(range(L))])
 
     @ti.kernel
-    def run(self, src: ti.template(), sink: ti.template()):
-        """``sink.store(y, x, m)`` for every pixel, ``m`` the median of ``src`` (an ``(H, W)``
-        plane) over the window centred there, symmetric borders.  One launch."""
+    def _sort(self, src: ti.template()):
+        """Per size, stage 1: the sorted window columns of ``src`` (an ``(H, W)`` plane) and
+        the plane's size, into the bucket.  Sorting here rather than in the bucket kernel
+        saves a copy of the plane into the bucket: 0.3 ms of a 15 ms iteration at 400x300 on
+        the 2-core CPU, for a column sort that compiles in a fraction of a second."""
+        self._tree.size[0] = self.H
+        self._tree.size[1] = self.W
+        self._sort_columns(src)
+
+    @ti.kernel
+    def _store(self, sink: ti.template()):
+        """Per size, stage 3: the medians of every block of rows, pixel by pixel, into the
+        sink."""
         sink.begin()
-        if ti.static(self.median_size == 1):
-            for y, x in src:
-                sink.store(y, x, src[y, x])
+        L = ti.static(self.lanes)
+        for yb, x in ti.ndrange(self._row_blocks, self.W):
+            medians = self._tree.medians[yb, x]
+            for lane in ti.static(range(L)):
+                y = yb * L + lane
+                if y < self.H:
+                    sink.store(y, x, medians[lane])
+
+    @ti.kernel
+    def _copy(self, src: ti.template(), sink: ti.template()):
+        """The 1x1 median: ``src`` itself."""
+        sink.begin()
+        for y, x in src:
+            sink.store(y, x, src[y, x])
+
+    def run(self, src, sink):
+        """``sink.store(y, x, m)`` for every pixel, ``m`` the median of ``src`` (an ``(H, W)``
+        plane) over the window centred there, symmetric borders.  Three launches (one for
+        ``size`` 1): :meth:`_sort`, the bucket's tree, :meth:`_store`."""
+        if self.median_size == 1:
+            self._copy(src, sink)
         else:
-            self._sort_columns(src)
-            self._median_of_columns()
-            self._store_medians(sink)
+            self._sort(src)
+            self._tree._bucket_median()
+            self._store(sink)

@@ -20,7 +20,7 @@ M matters.
 """
 import taichi as ti
 
-from ..kernels.backend import FieldPool
+from ..kernels.backend import FieldPool, bucket_shape
 
 __all__ = ["COSTS", "MatchingCost"]
 
@@ -39,6 +39,13 @@ class MatchingCost:
     """Owns what the pixel cost needs besides the images (the census transforms of both
     views, for ``"ad_census"``) and evaluates M at one pixel pair (:meth:`cost`).
 
+    The census lives in the pool's bucket tree (see
+    :class:`lss_kernels.kernels.backend.FieldPool`): the grey planes and the census words of
+    both views, view 0 the left, 1 the right, in planes of the size bucket's shape.  The
+    transform, :meth:`_bucket_census`, touches only those fields and reads the image's size at
+    run time, so it compiles once per size bucket; :meth:`_load` (the greys, per size) is
+    small.
+
     Parameters
     ----------
     pool : FieldPool
@@ -52,24 +59,38 @@ class MatchingCost:
         self.H, self.W, self.kind = int(height), int(width), kind
         self.census = kind == "ad_census"
         if self.census:
-            shape = (self.H, self.W)
-            self.census_left = pool.vector(2, ti.u32, shape)
-            self.census_right = pool.vector(2, ti.u32, shape)
-            self.grey = pool.field(ti.f32, shape)
+            self.bucket = bucket_shape(self.H, self.W)
+            shape = (2,) + self.bucket
+            # H and W of the images in the bucket, written by every _load
+            self._size = pool.field(ti.i32, (2,), bucket=True)
+            self.grey = pool.field(ti.f32, shape, bucket=True)
+            self.words = pool.vector(2, ti.u32, shape, bucket=True)
 
     @ti.kernel
-    def _transform(self, img: ti.template(), out: ti.template()):
-        """The census transform of ``img`` into ``out``.  Each pixel's grey is computed once,
-        then compared: the same colour is the same grey, never below the centre, as in the
-        specification (:func:`lss_kernels.reference.kernels.census`).  A grey computed at
-        every use, as a neighbour and as the centre, may be summed in other orders by LLVM's
-        fast-math reassociation, and a neighbour of the centre's own colour could then count
-        as below it."""
-        for y, x in img:
-            p = img[y, x]
-            self.grey[y, x] = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
-        for y, x in out:
-            centre = self.grey[y, x]
+    def _load(self, left: ti.template(), right: ti.template()):
+        """Per size: the images' size and their greys into the bucket.  Each pixel's grey is
+        computed once, then compared (:meth:`_bucket_census`): the same colour is the same grey,
+        never below the centre, as in the specification
+        (:func:`lss_kernels.reference.kernels.census`).  A grey computed at every use, as a
+        neighbour and as the centre, may be summed in other orders by LLVM's fast-math
+        reassociation, and a neighbour of the centre's own colour could then count as below
+        it."""
+        self._size[0] = self.H
+        self._size[1] = self.W
+        for view in ti.static(range(2)):
+            img = ti.static((left, right)[view])
+            for y, x in img:
+                p = img[y, x]
+                self.grey[view, y, x] = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
+
+    @ti.kernel
+    def _bucket_census(self):
+        """Per bucket: the census transforms of both views' greys into ``words``, for the
+        run-time ``H x W`` region only."""
+        height = self._size[0]
+        width = self._size[1]
+        for view, y, x in ti.ndrange(2, height, width):
+            centre = self.grey[view, y, x]
             words = ti.Vector([ti.u32(0), ti.u32(0)])
             bit = 0
             for dy, dx in ti.static(ti.ndrange((-_RADIUS, _RADIUS + 1),
@@ -77,19 +98,24 @@ class MatchingCost:
                 if ti.static(dy != 0 or dx != 0):
                     # image coordinates clamped: a neighbour clamped onto the centre is the
                     # centre, not below it
-                    ny = ti.min(ti.max(y + dy, 0), self.H - 1)
-                    nx = ti.min(ti.max(x + dx, 0), self.W - 1)
-                    if self.grey[ny, nx] < centre:
+                    ny = ti.min(ti.max(y + dy, 0), height - 1)
+                    nx = ti.min(ti.max(x + dx, 0), width - 1)
+                    if self.grey[view, ny, nx] < centre:
                         words[bit // 32] |= ti.u32(1) << ti.u32(bit % 32)
                     bit += 1
-            out[y, x] = words
+            self.words[view, y, x] = words
 
     def setup(self, left, right):
         """The census transforms of both views (``left``, ``right``: ``(H, W)`` RGB vector
         fields in [0, 1]); nothing for ``"ad"``."""
         if self.census:
-            self._transform(left, self.census_left)
-            self._transform(right, self.census_right)
+            self._load(left, right)
+            self._bucket_census()
+
+    def census_words(self, view):
+        """The census of ``view`` (0: left, 1: right) as a ``(H, W, 2)`` uint32 array: bit
+        ``b`` of the 48 in word ``b // 32``."""
+        return self.words.to_numpy()[view, :self.H, :self.W]
 
     @ti.func
     def cost(self, left: ti.template(), right: ti.template(), y, xl, xr):
@@ -100,8 +126,8 @@ class MatchingCost:
             diff += ti.abs(left[y, xl][ch] - right[y, xr][ch])
         value = diff / 3.0
         if ti.static(self.census):
-            a = self.census_left[y, xl]
-            b = self.census_right[y, xr]
+            a = self.words[0, y, xl]
+            b = self.words[1, y, xr]
             bits = ti.math.popcnt(a[0] ^ b[0]) + ti.math.popcnt(a[1] ^ b[1])
             hamming = ti.cast(bits, ti.f32) / 48.0
             value = (1.0 - ti.exp(-value / _LAMBDA_AD)) + \
