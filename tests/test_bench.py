@@ -143,24 +143,26 @@ def test_side_by_side_exports_a_commit_and_finds_its_entry_point(tmp_path):
     assert sbs.entry_point(tree) == ("lss_kernels.apps.cli", "main")
 
 
-def test_setup_time_runs_first_known_and_new_sizes_on_a_fresh_cache_each_repeat(tmp_path):
+def test_setup_time_runs_first_known_new_and_new_bucket_sizes_on_a_fresh_cache_each_repeat(tmp_path):
     """The order of the processes and their caches, with a fake solve; the table's medians
     and the difference new - known."""
     st = _demo("setup_time")
     calls = []
-    fake = {"a": [9.0, 3.0], "b": [5.0]}
+    fake = {"a": [9.0, 3.0], "b": [5.0], "c": [8.0]}
 
     def run(scene, out, cache, iterations):
         calls.append((scene, cache.name, iterations))
         seen = [c for c in calls if c[0] == scene and c[1] == cache.name]
         return fake[scene][len(seen) - 1] + 0.1 * int(cache.name[-1])
-    times = st.measure(("a", "b"), tmp_path, 40, 3, run=run)
-    assert calls[:3] == [("a", "cache0", 40), ("a", "cache0", 40), ("b", "cache0", 40)]
-    assert [c[1] for c in calls] == ["cache0"] * 3 + ["cache1"] * 3 + ["cache2"] * 3
+    times = st.measure(("a", "b", "c"), tmp_path, 40, 3, run=run)
+    assert calls[:4] == [("a", "cache0", 40), ("a", "cache0", 40), ("b", "cache0", 40),
+                         ("c", "cache0", 40)]
+    assert [c[1] for c in calls] == ["cache0"] * 4 + ["cache1"] * 4 + ["cache2"] * 4
     assert times["first"] == pytest.approx([9.0, 9.1, 9.2])
-    lines = st.table(times, ((320, 240), (328, 236)), 40).splitlines()
+    lines = st.table(times, ((320, 240), (328, 236), (400, 300)), 40).splitlines()
     assert lines[2] == "| first size 320x240: every kernel compiled | 9.1 |"
     assert lines[3] == "| the same size again: kernels loaded | 3.1 |"
-    assert lines[-1] == "| **a new size adds** | **2.0** |"
+    assert lines[-2] == "| **a new size adds** | **2.0** |"
+    assert lines[-1] == "| **a new size bucket adds** | **5.0** |"
     with pytest.raises(argparse.ArgumentTypeError, match="WIDTHxHEIGHT"):
         st.parse_size("320")
