@@ -115,23 +115,23 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     m = [lev.margin for lev in solver.hierarchy.levels]
     margins = sum(4 * ((H + 2 * k) * (W + 2 * k) - H * W) * solver.c_max for k in m)
     # 2-D fields: 64 for the model's maps, 5 per level for the message cache (key, the two
-    # candidates' costs and refined positions), one per median window row
-    planes = (64 + 5 * levels + solver.params.median_size) * H * W * 4
+    # candidates' costs and refined positions)
+    planes = (64 + 5 * levels) * H * W * 4
     # the three row-filtered scratch planes of the separable filters carry half-width
     # margin rows above and below; they, phi's four derivative planes and the message
     # caches are lane planes, whose rows are padded to whole blocks of lanes
     half, padded = solver.levelset.filters.half, solver.levelset.blocks * solver.levelset.lanes
     filter_margins = 3 * 2 * half * padded * 4 + (7 + 5 * levels) * H * (padded - W) * 4
-    # the median's sorted columns (k per pixel) and its output plane are stored in blocks
-    # of lanes rows, over whole tiles of columns; the sorted columns also hold k // 2
-    # reflected columns on either side
+    # the median's sorted columns (k per pixel) and its output plane, one set shared by the
+    # solver's 7x7 filters, have the shape of the image's size bucket, in blocks of lanes
+    # rows over whole tiles of columns; the sorted columns also hold k // 2 reflected
+    # columns on either side; and the bucket's H and W
     k, ls = solver.params.median_size, solver.levelset.median
-    tile = ls._network[1]
-    rows = -(-H // ls.lanes) * ls.lanes
-    columns = tile * -(-W // tile)
-    planes += H * W * 4
-    filter_margins += (k * (rows * (columns + 2 * (k // 2)) - H * W)
-                       + rows * columns - H * W) * 4
+    assert solver.initialiser.median._tree is ls._tree
+    tile, (bucket_h, bucket_w) = ls._tree.network[1], ls.bucket
+    rows = -(-bucket_h // ls.lanes) * ls.lanes
+    columns = tile * -(-bucket_w // tile)
+    filter_margins += (k * rows * (columns + 2 * (k // 2)) + rows * columns) * 4 + 8
     # set-up scratch kept for the solver's life: B_occ's block of rows (as many values as
     # CHUNK planes, rounded up to whole rows) and a 2-D distance map, and the distance
     # transforms' line buffers (3 arrays of lines x longest axis): phi's (all lines of the
