@@ -26,7 +26,9 @@ and removes stray matches.  Then:
   ``OPENING`` square (thin ridges and specks go); their 4-connected components are the
   candidates, and the one with the largest ``area * (1 - 1.5 r)^2`` (``r`` = its
   centroid's distance from the image centre, as a fraction of the half-diagonal) is the
-  object: the largest near region closest to the centre.
+  object: the largest near region closest to the centre.  It then takes back the near
+  pixels within ``REGROW`` of it: an object large enough to pull the fit up loses its rim
+  to the fit.
 
 A region found by a point or ``auto`` starts phi widened by ``SPILL`` pixels: a start that
 spills over the object is recovered by the evolution, one that covers only part of it is not.
@@ -370,6 +372,6 @@ class InitialRegion:
         self.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
         self.erode(0)
         self.dilate(REGROW)
-        mask = (self.label.to_numpy() >= 0) & near | mask
+        mask = ((self.label.to_numpy() >= 0) & near) | mask
         self.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
         return self._widened()
