@@ -14,7 +14,15 @@ truth:
   the foreground (the "foreground" is not in front);
 - the foreground surface leaves the searched disparity range ``[0, d_max]`` on more than
   ``MAX_OUT_OF_RANGE`` of the foreground (no match there supports it: on periodic texture a
-  quadratic bent far out of range can still explain the stripes).
+  quadratic bent far out of range can still explain the stripes);
+- the background surface lies more than ``MAX_OFFSET`` left-view pixels from the
+  background's own matches: the median over its visible pixels of the refined disparity
+  (:mod:`lss_kernels.model.refine`, which searches +-24 px around the surface with the
+  AD-Census cost) minus the surface.  On a dark, weakly textured background the AD cost can
+  let Theta_2 drift towards Theta_1 while a jump of a few pixels remains: the boundary is
+  right, the occlusion as narrow as the false jump, and the matches say so.  The
+  foreground's offset is reported but not judged: on a striped foreground the refinement's
+  matches can themselves lie a period off.
 
 The pair is then solved again with the parameters changed by ``RECOVERY``: the AD-Census
 cost (it matches dark and low-contrast texture by the order of grey values) and messages
@@ -42,7 +50,7 @@ import numpy as np
 
 from .model.init import InitError
 
-__all__ = ["MAX_CROSSING", "MAX_OUT_OF_RANGE", "MIN_JUMP", "PERIODIC", "PERIODIC_AREA", "RECOVERY",
+__all__ = ["MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE", "MIN_JUMP", "PERIODIC", "PERIODIC_AREA", "RECOVERY",
            "collapse", "model_health", "periodic_fraction", "periodicity", "with_recovery"]
 
 #: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
@@ -51,6 +59,9 @@ MIN_JUMP = 1.0
 MAX_CROSSING = 0.5
 #: Largest fraction of the foreground where Theta_1 lies outside [0, d_max] in a sound model.
 MAX_OUT_OF_RANGE = 0.02
+#: Largest median distance (left-view pixels) of the background's refined disparity from
+#: its surface in a sound model (bad-4.0's threshold).
+MAX_OFFSET = 4.0
 #: The parameters of the second solve.
 RECOVERY = {"matching_cost": "ad_census", "message_ambiguity": 0.2}
 #: The parameters of the first solve of a periodic pair.
@@ -107,11 +118,15 @@ def periodic_fraction(image) -> float:
 
 def model_health(result, d_max) -> dict:
     """``area`` (foreground fraction, cyclopean), ``jump`` (mean left-view jump over the
-    foreground), ``crossing`` (fraction of the foreground where Theta_1 <= Theta_2) and
-    ``out_of_range`` (fraction of the foreground where Theta_1 is outside ``[0, d_max]``)."""
+    foreground), ``crossing`` (fraction of the foreground where Theta_1 <= Theta_2),
+    ``out_of_range`` (fraction of the foreground where Theta_1 is outside ``[0, d_max]``) and
+    ``offset_fg``, ``offset_bg`` (per layer, the median of the refined disparity minus the
+    surface over the layer's visible left-view pixels; 0 for an empty layer, and for a
+    result without refinement, whose disparity is its surface)."""
+    offsets = layer_offsets(result)
     fg = np.asarray(result.phi) > 0
     if not fg.any():
-        return {"area": 0.0, "jump": 0.0, "crossing": 1.0, "out_of_range": 0.0}
+        return {"area": 0.0, "jump": 0.0, "crossing": 1.0, "out_of_range": 0.0, **offsets}
     y, x = np.nonzero(fg)
     x, y = x.astype(np.float64), y.astype(np.float64)
     basis = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=-1)
@@ -119,7 +134,21 @@ def model_health(result, d_max) -> dict:
     jump = front - basis @ np.asarray(result.theta_bg, np.float64)
     return {"area": float(fg.mean()), "jump": float(jump.mean()),
             "crossing": float((jump <= 0).mean()),
-            "out_of_range": float(((front < 0) | (front > float(d_max))).mean())}
+            "out_of_range": float(((front < 0) | (front > float(d_max))).mean()), **offsets}
+
+
+def layer_offsets(result) -> dict:
+    """``offset_fg``, ``offset_bg``: per layer (``result.foreground`` and the rest), the
+    median of ``result.disparity - result.surface`` over the layer's pixels outside
+    ``result.occlusion`` (left view); 0 where the layer has none."""
+    residual = np.asarray(result.disparity, np.float64) - np.asarray(result.surface, np.float64)
+    foreground = np.asarray(result.foreground, bool)
+    visible = ~np.asarray(result.occlusion, bool)
+    offsets = {}
+    for name, layer in (("offset_fg", foreground), ("offset_bg", ~foreground)):
+        values = residual[layer & visible]
+        offsets[name] = float(np.median(values)) if values.size else 0.0
+    return offsets
 
 
 def collapse(health: dict):
@@ -137,6 +166,9 @@ def collapse(health: dict):
     if health["out_of_range"] > MAX_OUT_OF_RANGE:
         return (f"the foreground surface leaves [0, d_max] on {health['out_of_range']:.0%} "
                 f"of the foreground (> {MAX_OUT_OF_RANGE:.0%})")
+    if abs(health["offset_bg"]) > MAX_OFFSET:
+        return (f"the background surface lies {health['offset_bg']:+.1f} px from its own "
+                f"matches (median over its visible pixels; more than {MAX_OFFSET:g})")
     return None
 
 

@@ -12,20 +12,34 @@ H, W = 20, 30
 D_MAX = 64.0
 
 
-def model(jump=10.0, slope=0.0, region=(slice(5, 15), slice(10, 20))):
+def model(jump=10.0, slope=0.0, region=(slice(5, 15), slice(10, 20)), matches_bg=0.0,
+          matches_fg=0.0):
     """A Result-like model: phi > 0 on ``region``; Theta_2 = 20, Theta_1 = 20 + jump +
-    slope * x (left-view disparity over {x^2, xy, y^2, x, y, 1})."""
+    slope * x (left-view disparity over {x^2, xy, y^2, x, y, 1}); the refined disparity
+    lies ``matches_fg`` from the surface on the foreground and ``matches_bg`` on the background,
+    except on the occluded strip (two columns left of the region's left edge), where it is 0."""
     phi = -np.ones((H, W))
     if region is not None:
         phi[region] = 1.0
+    foreground = phi > 0
+    x = np.arange(W, dtype=np.float64)[None, :].repeat(H, 0)
+    surface = np.where(foreground, 20.0 + jump + slope * x, 20.0)
+    occlusion = np.zeros((H, W), bool)
+    left_edge = foreground & ~np.roll(foreground, 1, axis=1)
+    for shift in (1, 2):
+        occlusion |= np.roll(left_edge, -shift, axis=1) & ~foreground
+    disparity = surface + np.where(foreground, matches_fg, matches_bg)
+    disparity[occlusion] = 0.0
     return SimpleNamespace(phi=phi, theta_fg=np.array([0, 0, 0, slope, 0, 20.0 + jump]),
-                           theta_bg=np.array([0, 0, 0, 0, 0, 20.0]), recovery={})
+                           theta_bg=np.array([0, 0, 0, 0, 0, 20.0]), foreground=foreground,
+                           surface=surface, disparity=disparity, occlusion=occlusion,
+                           recovery={})
 
 
 def test_a_sound_model_has_a_jump_in_front():
     health = model_health(model(jump=10.0), D_MAX)
     assert health == {"area": 100 / (H * W), "jump": pytest.approx(10.0), "crossing": 0.0,
-                      "out_of_range": 0.0}
+                      "out_of_range": 0.0, "offset_fg": 0.0, "offset_bg": 0.0}
     assert collapse(health) is None
 
 
@@ -39,6 +53,23 @@ def test_each_kind_of_collapse_is_named():
     health = model_health(split, D_MAX)
     assert health["jump"] == pytest.approx(40 / 11) and health["crossing"] == pytest.approx(6 / 11)
     assert "behind the background on 55%" in collapse(health)
+
+
+def test_a_surface_far_from_its_own_matches_is_a_collapse():
+    """The background's refined matches lie 12 px below Theta_2 (a background pulled
+    towards the foreground): a collapse, named with the offset; 3 px is within bounds."""
+    health = model_health(model(matches_bg=-12.0), D_MAX)
+    assert health["offset_bg"] == -12.0 and health["offset_fg"] == 0.0
+    assert "background surface lies -12.0 px from its own matches" in collapse(health)
+    assert collapse(model_health(model(matches_bg=3.0), D_MAX)) is None
+    assert model_health(model(matches_bg=3.0), D_MAX)["offset_bg"] == 3.0
+
+
+def test_the_foreground_offset_is_reported_but_not_judged():
+    """A striped foreground's refined matches may lie a period off its surface."""
+    health = model_health(model(matches_fg=7.0), D_MAX)
+    assert health["offset_fg"] == 7.0 and health["offset_bg"] == 0.0
+    assert collapse(health) is None
 
 
 def test_a_foreground_surface_bent_out_of_the_searched_range_is_a_collapse():
