@@ -125,10 +125,13 @@ class Solver:
         self.profile = profile
         H, W, C = self.H, self.W, self.c_max
 
+        # every field of the solve has the shape of the image's size bucket, and the kernels
+        # read H and W from the extent at run time: they compile once per bucket (and range)
         pool = FieldPool()
         self.pool = pool
-        self.left = pool.vector(3, ti.f32, (H, W))
-        self.right = pool.vector(3, ti.f32, (H, W))
+        self.extent = pool.extent(H, W)
+        self.left = pool.vector(3, ti.f32, self.extent.bucket, bucket=True)
+        self.right = pool.vector(3, ti.f32, self.extent.bucket, bucket=True)
         self.matching = MatchingCost(pool, H, W, self.params.matching_cost)
         self.hierarchy = PatchHierarchy(pool, H, W, C, self.params.patch_sizes)
         self.messages = Messages(self.hierarchy, self.params.subpixel_messages, pool,
@@ -171,8 +174,8 @@ class Solver:
         """Set-up of a solve in zeroed fields: images, cost volumes, the initial phi."""
         self.left_image = left
         self.d_max = float(d_max)
-        self.left.from_numpy(left)
-        self.right.from_numpy(right)
+        self.left.from_numpy(self.extent.padded(left))
+        self.right.from_numpy(self.extent.padded(right))
 
         t0 = time.perf_counter()
         self.matching.setup(self.left, self.right)
@@ -228,8 +231,8 @@ class Solver:
         consensus is already in the hierarchy's fields."""
         if not consensus_ready:
             self._first_consensus()
-        mean = self.hierarchy.consensus_mean.to_numpy()
-        prec = self.hierarchy.precision.to_numpy()
+        mean = self.extent.image(self.hierarchy.consensus_mean)
+        prec = self.extent.image(self.hierarchy.precision)
         sel = left_mask & (prec > 0)
         return float(np.median(mean[sel])) if sel.any() else 0.0
 
@@ -256,7 +259,7 @@ class Solver:
         # x + c > W - 1) is no evidence: its costs compare clamped border columns
         c = self.hierarchy.consensus_mean[y, x]
         xf = ti.cast(x, ti.f32)
-        if xf - c < 0.0 or xf + c > self.W - 1.0:
+        if xf - c < 0.0 or xf + c > self.extent.width() - 1.0:
             w = 0.0
         k = ti.static(0.5 * self.params.robust_fit)      # left-view -> cyclopean units
         w_fg = 0.0
@@ -361,9 +364,9 @@ class Solver:
         self.occ.render_left(self.shapes, self.levelset.phi)
         clean = lambda d: np.clip(np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0), 0.0,
                                   self.d_max).astype(np.float32)
-        out = (clean(self.occ.disparity_left.to_numpy()),
-               self.occ.occlusion_left.to_numpy().astype(bool),
-               self.occ.foreground_left.to_numpy().astype(bool))
+        out = (clean(self.extent.image(self.occ.disparity_left)),
+               self.extent.image(self.occ.occlusion_left).astype(bool),
+               self.extent.image(self.occ.foreground_left).astype(bool))
         if not refine or self.refinement is None:
             return out + (out[0],) if refine else out
         t0 = time.perf_counter()
@@ -371,12 +374,12 @@ class Solver:
                             self.occ.foreground_left, self.occ.occlusion_left, self.d_max)
         ti.sync()
         self.timings["refine"] = time.perf_counter() - t0
-        return out + (clean(self.refinement.surface.to_numpy()),)
+        return out + (clean(self.extent.image(self.refinement.surface)),)
 
     def consensus(self):
         """Consensus mean and sigma, cyclopean frame, left-view disparity units."""
-        prec = self.hierarchy.precision.to_numpy()
-        mean = 2.0 * self.hierarchy.consensus_mean.to_numpy()
+        prec = self.extent.image(self.hierarchy.precision)
+        mean = 2.0 * self.extent.image(self.hierarchy.consensus_mean)
         with np.errstate(divide="ignore"):
             sigma = np.where(prec > 0, 2.0 / np.sqrt(np.maximum(prec, 1e-30)), self.d_max)
         return mean.astype(np.float32), np.minimum(sigma, self.d_max).astype(np.float32)
@@ -385,10 +388,10 @@ class Solver:
         """Current state as numpy arrays (see :class:`Result` for frames and units)."""
         disparity, occlusion, foreground = self.left_view()
         mean, sigma = self.consensus()
-        return dict(phi=self.levelset.phi.to_numpy(), consensus_mean=mean,
+        return dict(phi=self.extent.image(self.levelset.phi), consensus_mean=mean,
                     consensus_sigma=sigma, disparity=disparity, occlusion=occlusion,
                     foreground=foreground, initial_foreground=self.initial_foreground_left(),
-                    D=2.0 * self.levelset.D.to_numpy())
+                    D=2.0 * self.extent.image(self.levelset.D))
 
     def initial_foreground_left(self):
         """The initial foreground in the left view."""
@@ -431,7 +434,7 @@ class Solver:
                             + self.timings.get("refine", 0.0))
         return Result(disparity=disparity, surface=surface, occlusion=occlusion,
                       foreground=foreground,
-                      phi=self.levelset.phi.to_numpy(), theta_fg=th[0], theta_bg=th[1],
+                      phi=self.extent.image(self.levelset.phi), theta_fg=th[0], theta_bg=th[1],
                       consensus_mean=mean, consensus_sigma=sigma, iterations=self.iteration,
                       stop_reason=self.stop_reason or "not finished", timings=timings,
                       history=list(self.history))

@@ -1,5 +1,6 @@
-"""Size buckets: the median's tree of merge networks and the census transform compile once
-per bucket of image sizes (lss_kernels.kernels.backend.bucket_shape), not once per size."""
+"""Size buckets: the kernels of a solve compile once per bucket of image sizes
+(lss_kernels.kernels.backend.bucket_shape), not once per size, save the few that keep the
+float code of one size (the upward pass, the ray cast, the set-up's sums of children)."""
 import json
 import os
 import subprocess
@@ -69,7 +70,11 @@ def test_a_pool_destroyed_before_any_kernel_ran_leaves_nothing_behind(ti_arch):
 
 # Two sizes of the bucket 64x64, each followed by backend.restart, as `lss eval` builds its
 # solvers: the restart writes the offline cache of the program it ends, so the .tic files
-# after each size are the kernels compiled so far.
+# after each size are the kernels compiled so far.  Besides the median and the census, the
+# level set (derivatives, re-initialisation, the median's settle into phi and D, the net
+# change), the shapes' fit and the occlusion geometry run on planes of the bucket; the ray
+# cast compiles once per size (its float code must stay that of one size), which shows that
+# a kernel compiled again is seen.
 BUCKET_SCRIPT = r"""
 import json, sys
 from pathlib import Path
@@ -78,15 +83,22 @@ import taichi as ti
 from lss_kernels.kernels import backend
 from lss_kernels.kernels.backend import FieldPool
 from lss_kernels.kernels.median import Assign, MedianFilter
+from lss_kernels.model.levelset import LevelSet
 from lss_kernels.model.matching import MatchingCost
+from lss_kernels.model.occlusion import OcclusionGeometry
+from lss_kernels.model.shapes import GlobalShapes, WeightPlanes
+from lss_kernels.params import Params
 
 cache, out = Path(sys.argv[1]), Path(sys.argv[2])
+kernels = sys.argv[3].split(",")
 backend.init("cpu", threads=1, offline_cache=True)
 rng = np.random.default_rng(5)
 results, entries = {}, []
 for h, w in ((37, 53), (45, 61)):
     plane = np.round(rng.standard_normal((h, w)) * 2).astype(np.float32)
     image = (np.round(rng.random((h, w, 3)) * 4) / 4).astype(np.float32)
+    y, x = np.mgrid[0:h, 0:w]
+    phi = ((12.0 - np.hypot(x - w / 2, y - h / 2)) / 10.0).astype(np.float32)
     pool = FieldPool()
     # two 7x7 filters in one pool, as in a solver (the level set's and the initialiser's)
     medians = [MedianFilter(pool, h, w, 7) for _ in range(2)]
@@ -94,7 +106,13 @@ for h, w in ((37, 53), (45, 61)):
     matcher = MatchingCost(pool, h, w, "ad_census")
     src, dst = pool.field(ti.f32, (h, w)), pool.field(ti.f32, (h, w))
     img = pool.vector(3, ti.f32, (h, w))
+    ls = LevelSet(pool, h, w, Params())
+    shapes = GlobalShapes(pool, h, w)
+    occ = OcclusionGeometry(pool, h, w, 8)
+    bucket = ls.extent.bucket
+    weight_fg, weight_bg, target = (pool.field(ti.f32, bucket, bucket=True) for _ in range(3))
     pool.finalize()
+    ls.setup()
     src.from_numpy(plane)
     img.from_numpy(image)
     medians[0].run(src, Assign(dst))
@@ -105,12 +123,27 @@ for h, w in ((37, 53), (45, 61)):
     results.update({f"plane{h}x{w}": plane, f"image{h}x{w}": image,
                     f"census{h}x{w}": matcher.census_words(0),
                     f"census_right{h}x{w}": matcher.census_words(1)})
+    ls.phi.from_numpy(ls.extent.padded(phi))
+    ls.reinitialise(ls.phi)
+    ls.net_change()
+    ls.derivatives()
+    weight_fg.from_numpy(ls.extent.padded((phi > 0).astype(np.float32)))
+    weight_bg.from_numpy(ls.extent.padded((phi <= 0).astype(np.float32)))
+    target.from_numpy(ls.extent.padded((4.0 + 0.1 * x + 2.0 * (phi > 0)).astype(np.float32)))
+    shapes.fit(WeightPlanes(weight_fg, weight_bg), target)
+    occ.compute(shapes, ls.phi_x, 1)
+    occ.refresh_phi_plus(ls.phi)
+    occ.render_left(shapes, ls.phi)
+    ls.phi_next.from_numpy(ls.extent.padded(plane))
+    ls.settle(shapes)
+    results[f"settled{h}x{w}"] = ls.extent.image(ls.phi)
+    ls.destroy()
     pool.destroy()
     backend.restart()
     seen = {}
     for path in cache.rglob("*.tic"):
         text = path.read_bytes()
-        for kernel in ("_bucket_median", "_bucket_census", "_store"):
+        for kernel in kernels:
             if f'"name":"{kernel}_c'.encode() in text:
                 seen.setdefault(kernel, []).append(path.name)
     entries.append(seen)
@@ -118,19 +151,25 @@ np.savez(out, **results)
 print(json.dumps(entries))
 """
 
+#: Kernels of the script that compile once per size bucket, each launched once per size.
+BUCKET_KERNELS = ("_bucket_median", "_bucket_census", "derivatives", "fit",
+                  "refresh_phi_plus", "render_left", "_features", "_signed", "net_change",
+                  "_pass")
+
 
 @pytest.fixture(scope="module")
 def two_sizes(tmp_path_factory, ti_arch):
-    """The median, the census and the offline-cache entries after each of two sizes of one
-    bucket, in a fresh process with an empty cache."""
+    """The median, the census, the level set's results and the offline-cache entries after
+    each of two sizes of one bucket, in a fresh process with an empty cache."""
     if ti_arch != "cpu":
         pytest.skip("the offline cache is exercised on the CPU")
     tmp = tmp_path_factory.mktemp("buckets")
     cache = tmp / "cache"
     env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=str(cache))
+    kernels = BUCKET_KERNELS + ("_sort", "_store", "_ray_cast")
     proc = subprocess.run([sys.executable, "-c", BUCKET_SCRIPT, str(cache),
-                           str(tmp / "out.npz")], env=env, capture_output=True, text=True,
-                          timeout=600)
+                           str(tmp / "out.npz"), ",".join(kernels)], env=env,
+                          capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     entries = json.loads(proc.stdout.splitlines()[-1])
     return entries, dict(np.load(tmp / "out.npz"))
@@ -150,20 +189,25 @@ def test_sizes_of_one_bucket_give_the_references_bit_for_bit(two_sizes):
         want = ref.median_filter(out[f"plane{size}"], 7)
         np.testing.assert_array_equal(out[f"median{size}"], want)
         np.testing.assert_array_equal(out[f"median_in_place{size}"], want)
+        np.testing.assert_array_equal(out[f"settled{size}"], want)
         words = _census_words(out[f"image{size}"])
         np.testing.assert_array_equal(out[f"census{size}"], words)
         np.testing.assert_array_equal(out[f"census_right{size}"], words)
 
 
-def test_a_second_size_of_a_bucket_compiles_neither_median_nor_census(two_sizes):
-    """The bucketed kernels' cache entries after the second size are those of the first
-    (one median tree for both filters); the filters' per-size store kernels show that a
-    kernel compiled again is seen."""
+def test_a_second_size_of_a_bucket_compiles_none_of_the_bucket_kernels(two_sizes):
+    """The bucketed kernels' cache entries after the second size are those of the first (one
+    median tree for both filters); the ray cast, compiled once per size, shows that a
+    kernel compiled again is seen.  The median's sort and store compile again only for the
+    test's own planes of the size's shape (the source ``src``; the sinks into ``dst`` and
+    ``src``), not for the level set's planes of the bucket."""
     (first, second), _ = two_sizes
-    for kernel in ("_bucket_median", "_bucket_census"):
-        assert len(first[kernel]) == 1, (kernel, first)
+    for kernel in BUCKET_KERNELS:
+        assert kernel in first, (kernel, first)
         assert second[kernel] == first[kernel], (kernel, first, second)
-    assert len(first["_store"]) == 2 and len(second["_store"]) == 4, (first, second)
+    assert len(first["_ray_cast"]) == 1 and len(second["_ray_cast"]) == 2, (first, second)
+    assert len(first["_sort"]) == 2 and len(second["_sort"]) == 3, (first, second)
+    assert len(first["_store"]) == 3 and len(second["_store"]) == 5, (first, second)
 
 
 def test_filters_of_a_pool_share_the_tree_of_their_window(ti_arch):
@@ -181,3 +225,45 @@ def test_filters_of_a_pool_share_the_tree_of_their_window(ti_arch):
         assert a.bucket == (64, 64) and other.bucket == (128, 64)
     finally:
         pool.destroy()
+
+
+# Whole solves at two sizes of one bucket (96x128) and one search range, as `lss eval` runs
+# them (a restart between): the names of the kernels whose cache entries the second adds.
+SOLVER_SCRIPT = r"""
+import json, re, sys
+from pathlib import Path
+from lss_kernels import Params, Solver
+from lss_kernels.kernels import backend
+from lss_kernels.scenes import make_scene
+
+cache = Path(sys.argv[1])
+backend.init("cpu", offline_cache=True)
+files = []
+for width, height in ((100, 75), (110, 70)):
+    scene = make_scene(None, width=width, height=height)
+    solver = Solver(scene.left, scene.right, 20.0, scene.init_ellipse,
+                    params=Params(max_iterations=12, matching_cost="ad_census"))
+    solver.run()
+    solver.close()
+    backend.restart()
+    files.append({p.name: p for p in cache.rglob("*.tic")})
+name = re.compile(rb'"name":"([A-Za-z0-9_]+?)_c[0-9]+_[0-9]+')
+added = sorted({m.decode() for f in set(files[1]) - set(files[0])
+                for m in name.findall(files[1][f].read_bytes())})
+print(json.dumps(added))
+"""
+
+#: The kernels of a solve that compile once per image size (see
+#: lss_kernels.kernels.backend.Extent): they keep the float code of one size.
+PER_SIZE_KERNELS = ["_cost_from_children", "_ray_cast", "upward"]
+
+
+@pytest.mark.slow
+def test_a_second_size_of_a_bucket_recompiles_only_the_per_size_kernels(tmp_path, ti_arch):
+    if ti_arch != "cpu":
+        pytest.skip("the offline cache is exercised on the CPU")
+    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=str(tmp_path / "cache"))
+    proc = subprocess.run([sys.executable, "-c", SOLVER_SCRIPT, str(tmp_path / "cache")],
+                          env=env, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert json.loads(proc.stdout.splitlines()[-1]) == PER_SIZE_KERNELS

@@ -47,6 +47,11 @@ def hierarchy(pair):
     pool.destroy()
 
 
+def _plane(field):
+    """The image's ``(H, W)`` corner of a plane of the size bucket's shape."""
+    return field.to_numpy()[:H, :W]
+
+
 def _inside(h, field, level):
     m = h.levels[level].margin
     return field.to_numpy()[m:m + H, m:m + W]
@@ -167,9 +172,9 @@ def test_hierarchy_in_one_pixel_blocks_matches_eight(pair, monkeypatch):
             for name in ("d_sum", "phi_max", "phi_plus_min", "relay_a", "relay_b"):
                 out[name, level] = h.levels[level].image(getattr(h.levels[level], name))
             for name in ("d_p", "sigma_p", "valid"):
-                out[name, level] = getattr(h.levels[level], name).to_numpy()
-        out["precision"] = h.precision.to_numpy()
-        out["consensus_mean"] = h.consensus_mean.to_numpy()
+                out[name, level] = _plane(getattr(h.levels[level], name))
+        out["precision"] = h.extent.image(h.precision)
+        out["consensus_mean"] = h.extent.image(h.consensus_mean)
         results.append(out)
         pool.destroy()
     eight, one = results
@@ -200,10 +205,10 @@ def test_messages_validity_and_consensus_match_reference(hierarchy):
         # Eq. 4: valid = (max phi > 0) XOR (min phi(x + delta_theta) < 0)
         valid = (ref.box_extreme(phi.astype(np.float32), s, np.max) > 0) != \
             (ref.box_extreme(phi_plus.astype(np.float32), s, np.min) < 0)
-        np.testing.assert_array_equal(hierarchy.levels[level].valid.to_numpy().astype(bool), valid)
+        np.testing.assert_array_equal(_plane(hierarchy.levels[level].valid).astype(bool), valid)
         d_p, sigma_p = ref.patch_messages(cost, d_mean, beta, subpixel=True)
-        got_d = hierarchy.levels[level].d_p.to_numpy()
-        got_s = hierarchy.levels[level].sigma_p.to_numpy()
+        got_d = _plane(hierarchy.levels[level].d_p)
+        got_s = _plane(hierarchy.levels[level].sigma_p)
         assert valid.any() or s == max(SIZES)   # the largest patches may all straddle it
         if valid.any():
             same = valid & np.isclose(got_d, d_p, rtol=0, atol=1e-4)
@@ -214,8 +219,9 @@ def test_messages_validity_and_consensus_match_reference(hierarchy):
         valids.append(valid)
     hierarchy.downward()
     prec, mean = ref.consensus(d_ps, sig_ps, valids, SIZES)
-    np.testing.assert_allclose(hierarchy.precision.to_numpy(), prec, rtol=1e-4, atol=1e-12)
-    np.testing.assert_allclose(hierarchy.consensus_mean.to_numpy(), mean, rtol=1e-4,
+    np.testing.assert_allclose(hierarchy.extent.image(hierarchy.precision), prec, rtol=1e-4,
+                               atol=1e-12)
+    np.testing.assert_allclose(hierarchy.extent.image(hierarchy.consensus_mean), mean, rtol=1e-4,
                                atol=1e-4)
     pool.destroy()
 
@@ -235,14 +241,14 @@ def test_candidate_messages_match_scan_at_integer_and_extreme_means(hierarchy, d
     beta = 0.4 * 3 / C    # a strong prior, so that it moves many argmins
     hierarchy.messages.run(beta, True, True, keep=True)
     for level, s in enumerate(SIZES):
-        assert hierarchy.levels[level].valid.to_numpy().all()
+        assert _plane(hierarchy.levels[level].valid).all()
         cost = _inside(hierarchy, hierarchy.levels[level].cost, level).astype(np.float64)
         d_p, sigma_p = ref.patch_messages(cost, ref.box_mean(D.astype(np.float32), s), beta,
                                           subpixel=True)
-        got_d = hierarchy.levels[level].d_p.to_numpy()
+        got_d = _plane(hierarchy.levels[level].d_p)
         same = np.isclose(got_d, d_p, rtol=0, atol=1e-4)
         assert same.mean() > 0.99
-        np.testing.assert_allclose(hierarchy.levels[level].sigma_p.to_numpy()[same], sigma_p[same],
+        np.testing.assert_allclose(_plane(hierarchy.levels[level].sigma_p)[same], sigma_p[same],
                                    rtol=1e-4)
     pool.destroy()
 
@@ -266,10 +272,10 @@ def test_cached_candidates_follow_a_moving_prior_mean(hierarchy):
                 cost = _inside(hierarchy, hierarchy.levels[level].cost, level).astype(np.float64)
                 want, sigma = ref.patch_messages(cost, ref.box_mean(D.astype(np.float32), s),
                                                  beta, subpixel=True)
-                got = hierarchy.levels[level].d_p.to_numpy()
+                got = _plane(hierarchy.levels[level].d_p)
                 same = np.isclose(got, want, rtol=0, atol=1e-4)
                 assert same.mean() > 0.99, (beta, level, same.mean())
-                np.testing.assert_allclose(hierarchy.levels[level].sigma_p.to_numpy()[same],
+                np.testing.assert_allclose(_plane(hierarchy.levels[level].sigma_p)[same],
                                            sigma[same], rtol=1e-4)
             pool.destroy()
 
@@ -283,10 +289,10 @@ def test_first_iteration_messages_ignore_prior_and_validity(hierarchy):
     with pytest.raises(ValueError, match="validity needs the prior"):
         hierarchy.messages.run(10.0, False, True, keep=True)
     for level in range(len(SIZES)):
-        assert hierarchy.levels[level].valid.to_numpy().all()
+        assert _plane(hierarchy.levels[level].valid).all()
         cost = _inside(hierarchy, hierarchy.levels[level].cost, level).astype(np.float64)
         want, _ = ref.patch_messages(cost, np.zeros((H, W)), 0.0, subpixel=True)
-        np.testing.assert_allclose(hierarchy.levels[level].d_p.to_numpy(), want, atol=1e-4)
+        np.testing.assert_allclose(_plane(hierarchy.levels[level].d_p), want, atol=1e-4)
         assert np.abs(want - (cost.argmin(2) + 1)).max() <= 0.5
         assert (want != np.round(want)).mean() > 0.5     # refined below the integer grid
     pool.destroy()
@@ -317,7 +323,7 @@ def test_cached_candidates_are_dropped_when_the_costs_change(pair):
             cost = _inside(h, h.levels[level].cost, level).astype(np.float64)
             want, _ = ref.patch_messages(cost, ref.box_mean(D.astype(np.float32), s), beta,
                                          subpixel=True)
-            same = np.isclose(h.levels[level].d_p.to_numpy(), want, rtol=0, atol=1e-4)
+            same = np.isclose(_plane(h.levels[level].d_p), want, rtol=0, atol=1e-4)
             assert same.mean() > 0.99
     aux.destroy()
     pool.destroy()
@@ -345,7 +351,7 @@ def test_distinctness_weights_match_the_specification(pair):
     for level in range(len(SIZES)):
         cost = _inside(h, h.levels[level].cost, level)
         want = ref.distinctness(cost, 0.3)
-        got = lanes.to_image(weighted.distinct[level], W)
+        got = lanes.to_image(weighted.distinct[level], H, W)
         np.testing.assert_allclose(got, want, atol=1e-4)
         np.testing.assert_allclose(relays[1][level], relays[0][level] * want, rtol=1e-4,
                                    atol=1e-12)
@@ -367,7 +373,7 @@ def test_integer_messages_without_subpixel_refinement(pair):
     Messages(h, subpixel=False).run(0.0, False, False, keep=True)
     for level in range(len(SIZES)):
         cost = _inside(h, h.levels[level].cost, level)
-        np.testing.assert_array_equal(h.levels[level].d_p.to_numpy(), cost.argmin(2) + 1)
+        np.testing.assert_array_equal(_plane(h.levels[level].d_p), cost.argmin(2) + 1)
     pool.destroy()
 
 
@@ -529,7 +535,7 @@ def test_distance_transform_is_exact(ti_arch, shape):
     pool.finalize()
     f.from_numpy(np.where(feat, 0, INF).astype(np.float32))
     edt = DistanceTransform(shape, max_scratch=5 * max(shape))   # several batches
-    edt.run(f)
+    edt.run(f, shape[:2])
     pts = np.argwhere(feat)
     grid = np.stack(np.meshgrid(*map(np.arange, shape), indexing="ij"), -1).reshape(-1, 3)
     brute = ((grid[:, None, :] - pts[None]) ** 2).sum(-1).min(1).reshape(shape)
@@ -689,11 +695,11 @@ def test_settle_counts_sign_flips_and_writes_eq3(ti_arch, k):
     theta = np.array([[0.0, 0.0, 0.0, 3.0, 0.0, 5.0], [0.0, 0.0, 0.0, 0.0, 3.0, 0.0]])
     shapes.set(theta[0], theta[1])
     ls.d_limit[None] = 6.5
-    ls.phi.from_numpy(before)
-    ls.phi_next.from_numpy(src)
+    ls.phi.from_numpy(ls.extent.padded(before))
+    ls.phi_next.from_numpy(ls.extent.padded(src))
     ls.settle(shapes)
     after = ref.median_filter(src, k) if k > 1 else src
-    np.testing.assert_array_equal(ls.phi.to_numpy(), after)
+    np.testing.assert_array_equal(ls.extent.image(ls.phi), after)
     assert ls.flipped[None] == ((after > 0) != (before > 0)).sum() > 0
     assert ls.area[None] == (after > 0).sum() > 0
     y, x = np.mgrid[0:9, 0:14].astype(np.float64)
@@ -701,7 +707,7 @@ def test_settle_counts_sign_flips_and_writes_eq3(ti_arch, k):
     th1, th2 = 3.0 * xn + 5.0, 3.0 * yn
     want = np.clip(np.where(after > 0, th1, th2), 0.0, 6.5)
     assert (want == 6.5).any() and (want == 0.0).any()     # both clamps are exercised
-    np.testing.assert_allclose(ls.D.to_numpy(), want, atol=1e-5)
+    np.testing.assert_allclose(ls.extent.image(ls.D), want, atol=1e-5)
     pool.destroy()
 
 
@@ -741,7 +747,7 @@ def test_census_transform_matches_the_specification_bit_for_bit(ti_arch, height,
 def test_derivatives_and_curvature_match_reference(levelset):
     rng = np.random.default_rng(11)
     phi = _smooth_phi(rng).astype(np.float32)
-    levelset.phi.from_numpy(phi)
+    levelset.phi.from_numpy(levelset.extent.padded(phi))
     levelset.derivatives()
     _compare_derivatives(levelset, phi)
 
@@ -769,7 +775,7 @@ def _check_derivatives_at_size(phi):
     ls = LevelSet(pool, *phi.shape, Params())
     pool.finalize()
     ls.setup()
-    ls.phi.from_numpy(phi.astype(np.float32))
+    ls.phi.from_numpy(ls.extent.padded(phi.astype(np.float32)))
     ls.derivatives()
     _compare_derivatives(ls, phi)
     ls.destroy()
@@ -842,14 +848,14 @@ def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
     b_map = (0.5 + rng.random((H, W))).astype(np.float32)
     dtheta = rng.uniform(-3.0, 3.0, (H, W)).astype(np.float32)
     volume = rng.random((H, W, C)).astype(np.float32)
-    ls.phi.from_numpy(phi)
+    ls.phi.from_numpy(ls.extent.padded(phi))
     given_b.b.from_numpy(b_map)
-    occ.delta_theta.from_numpy(dtheta)
+    occ.delta_theta.from_numpy(occ.extent.padded(dtheta))
     cost.from_numpy(volume)
     ls.derivatives()
     _compare_derivatives(ls, phi)
     ls.boundary_weight(given_b, shapes)
-    np.testing.assert_array_equal(ls.b_map.to_numpy(), b_map)
+    np.testing.assert_array_equal(ls.extent.image(ls.b_map), b_map)
     ls._step(cost, C, shapes, occ, p.dt, p.mu)
     kappa, n_x, n_y = ref.curvature(ref.gaussian_derivatives(phi.astype(np.float64),
                                                              p.curvature_sigma),
@@ -857,7 +863,7 @@ def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
     b_x, b_y = ref.gaussian_derivatives(b_map.astype(np.float64), p.curvature_sigma)[:2]
     want = ref.levelset_step(phi, volume, th1, th2, dtheta, b_map, b_x, b_y, kappa, n_x, n_y,
                              p.dt, p.mu, p.boundary_clip)
-    got = ls.phi_next.to_numpy()
+    got = ls.extent.image(ls.phi_next)
     assert np.abs(got - phi).max() > 0.05          # the step moves phi
     np.testing.assert_allclose(got, want, atol=1e-5)
     ls.destroy()
@@ -868,7 +874,7 @@ def test_curvature_of_a_disc_is_minus_one_over_radius(levelset):
     y, x = np.mgrid[0:H, 0:W]
     r = 9.0
     phi = (r - np.hypot(x - 17, y - 11)) * 0.01      # foreground inside: kappa = -1/r
-    levelset.phi.from_numpy(phi.astype(np.float32))
+    levelset.phi.from_numpy(levelset.extent.padded(phi.astype(np.float32)))
     levelset.derivatives()
     kappa = levelset.image(levelset.kappa)
     # on the row through the centre, away from the top and bottom borders (symmetric borders
@@ -881,7 +887,7 @@ def test_reinitialise_gives_scaled_signed_distance(levelset):
     y, x = np.mgrid[0:H, 0:W]
     mask = (x >= 10) & (x < 25)                 # a vertical band: distance along x only
     levelset.start(mask, C)
-    phi = levelset.phi.to_numpy()
+    phi = levelset.extent.image(levelset.phi)
     dist_in = np.minimum(x - 10, 24 - x) + 0.5
     dist_out = np.where(x < 10, 10 - x, x - 24) - 0.5
     np.testing.assert_allclose(phi, 0.01 * np.where(mask, dist_in, -dist_out), atol=1e-6)

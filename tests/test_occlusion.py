@@ -51,9 +51,9 @@ def test_occluded_extent_equals_the_jump_on_both_sides(geometry):
     occ, _, setup = geometry
     fg = _fg_band(20, 40)
     phi = setup(lambda x, y: 10 + 0 * x, lambda x, y: 4 + 0 * x, fg)
-    dt = occ.delta_theta.to_numpy()[0]
+    dt = occ.extent.image(occ.delta_theta)[0]
     assert np.allclose(dt[:20], 6.0) and np.allclose(dt[40:], -6.0)
-    visible_bg = (phi < 0) & (occ.phi_plus.to_numpy()[0] < 0)
+    visible_bg = (phi < 0) & (occ.extent.image(occ.phi_plus)[0] < 0)
     hidden = np.flatnonzero((phi < 0) & ~visible_bg)
     # the jump is 6 cyclopean pixels: 6 background pixels left of the left boundary and 6
     # right of the right boundary are occluded
@@ -67,7 +67,7 @@ def test_ray_cast_on_a_slanted_background_matches_the_analytic_intersection(geom
     th2 = lambda x, y: 2 + k * (x - 32) / 8
     fg = _fg_band(20, 44)
     p = setup(th1, th2, fg)
-    got = occ.delta_theta.to_numpy()
+    got = occ.extent.image(occ.delta_theta)
     s = np.sign(np.gradient(p))
     # t = Theta_1 - Theta_2(x - s t)  =>  t (1 - s k / 8) = 12 - 2 - k (x - 32) / 8
     t = (10 - k * (X - 32) / 8) / (1 - s * k / 8)
@@ -88,7 +88,7 @@ def test_ray_cast_runs_the_fixed_point_iteration_to_its_last_step(geometry):
     th2 = lambda x, y: 4 + 0.5 * (x - 32)
     p = setup(th1, th2, _fg_band(22, 44))
     px = np.broadcast_to(np.gradient(p), (H, W))
-    got = occ.delta_theta.to_numpy()
+    got = occ.extent.image(occ.delta_theta)
     six = ref.delta_theta(th1, th2, px, steps=6, c_cap=2.0 * C)
     exact = ref.delta_theta(th1, th2, px, steps=200, c_cap=2.0 * C)
     assert np.abs(six - exact).max() > 0.05          # the 6-step result is not converged
@@ -98,15 +98,15 @@ def test_ray_cast_runs_the_fixed_point_iteration_to_its_last_step(geometry):
 def test_no_jump_no_occlusion(geometry):
     occ, _, setup = geometry
     setup(lambda x, y: 4 + 0 * x, lambda x, y: 9 + 0 * x, _fg_band(20, 40))
-    assert np.all(occ.delta_theta.to_numpy() == 0)
+    assert np.all(occ.extent.image(occ.delta_theta) == 0)
 
 
 def test_left_view_rendering_of_two_fronto_parallel_planes(geometry):
     occ, _, setup = geometry
     setup(lambda x, y: 10 + 0 * x, lambda x, y: 4 + 0 * x, _fg_band(20, 40))
-    fg = occ.foreground_left.to_numpy()[0].astype(bool)
-    occl = occ.occlusion_left.to_numpy()[0].astype(bool)
-    d = occ.disparity_left.to_numpy()[0]
+    fg = occ.extent.image(occ.foreground_left)[0].astype(bool)
+    occl = occ.extent.image(occ.occlusion_left)[0].astype(bool)
+    d = occ.extent.image(occ.disparity_left)[0]
     # x_left = x_c + c: the cyclopean band [20, 40) appears at [30, 50) in the left view
     assert np.flatnonzero(fg).tolist() == list(range(30, 50))
     assert np.allclose(d[fg], 20.0) and np.allclose(d[~fg], 8.0)

@@ -73,7 +73,7 @@ def run_kernels(left, right, surface, fg, occ, d_max, passes, ratio=0.9):
     F.from_numpy(fg.astype(np.int32))
     O.from_numpy(occ.astype(np.int32))
     refinement.run(L, R, S, F, O, d_max)
-    out = refinement.surface.to_numpy()
+    out = refinement.extent.image(refinement.surface)
     pool.destroy()
     return out
 

@@ -159,8 +159,8 @@ def test_shape_weights_drop_consensus_that_points_outside_the_other_image(ti_arc
     rng = np.random.default_rng(0)
     mean = rng.uniform(0, solver.c_max, (H, W)).astype(np.float32)
     prec = rng.uniform(0.5, 2.0, (H, W)).astype(np.float32)
-    solver.hierarchy.consensus_mean.from_numpy(mean)
-    solver.hierarchy.precision.from_numpy(prec)
+    solver.hierarchy.consensus_mean.from_numpy(solver.extent.padded(mean))
+    solver.hierarchy.precision.from_numpy(solver.extent.padded(prec))
     assert solver.params.shape_weight_power == 2
     weight_fg, weight_bg = ti.field(ti.f32, (H, W)), ti.field(ti.f32, (H, W))
 
@@ -175,8 +175,8 @@ def test_shape_weights_drop_consensus_that_points_outside_the_other_image(ti_arc
     x = np.arange(W)[None, :]
     inside = (x - mean >= 0) & (x + mean <= W - 1)
     assert 0.05 < (~inside).mean() < 0.95
-    phi = solver.levelset.phi.to_numpy()
-    visible = (phi < 0) & (solver.occ.phi_plus.to_numpy() < 0)
+    phi = solver.extent.image(solver.levelset.phi)
+    visible = (phi < 0) & (solver.extent.image(solver.occ.phi_plus) < 0)
     np.testing.assert_allclose(weight_fg.to_numpy(),
                                np.where(inside & (phi >= 0), prec ** 2, 0.0), rtol=1e-6)
     np.testing.assert_allclose(weight_bg.to_numpy(),
@@ -227,12 +227,13 @@ def test_boundary_costs_match_a_numpy_reference(ti_arch):
     features = np.abs(slope) > params.occ_threshold
     assert 0 < features.sum() < features.size
     dist = ndimage.distance_transform_edt(~features)
-    np.testing.assert_allclose(solver.costs.b_occ.to_numpy(), np.minimum(dist / dist.max(), 1),
+    np.testing.assert_allclose(solver.extent.image(solver.costs.b_occ),
+                               np.minimum(dist / dist.max(), 1),
                                atol=1e-5)
 
     for image, edge in ((solver.left, solver.costs.edge_left),
                         (solver.right, solver.costs.edge_right)):
-        rgb = image.to_numpy().astype(np.float64)
+        rgb = solver.extent.image(image).astype(np.float64)
         grey = np.pad(rgb @ [0.299, 0.587, 0.114], 1, mode="edge")
         win = lambda dy, dx: grey[1 + dy:1 + dy + H, 1 + dx:1 + dx + W]
         gx = sum(dx * (2 - abs(dy)) * win(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
@@ -240,5 +241,6 @@ def test_boundary_costs_match_a_numpy_reference(ti_arch):
         edges = np.hypot(gx, gy) / 8.0 > params.mono_threshold
         assert edges.any()
         dist = ndimage.distance_transform_edt(~edges)
-        np.testing.assert_allclose(edge.to_numpy(), 0.5 * (1 - dist / dist.max()), atol=1e-5)
+        np.testing.assert_allclose(solver.extent.image(edge), 0.5 * (1 - dist / dist.max()),
+                                   atol=1e-5)
     solver.close()

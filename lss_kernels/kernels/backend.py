@@ -6,6 +6,7 @@ Taichi's offline cache so that a second run of the CLI skips most of the compile
 """
 import os
 
+import numpy as np
 import taichi as ti
 from . import taichi_patches
 
@@ -239,15 +240,15 @@ class FieldPool:
     Three trees, because Taichi's offline cache keys a kernel on every tree it touches
     (shapes and SNode ids):
 
-    * the fields whose shape depends on the image size only, finalised first;
+    * the fields whose shape is the image's own size, finalised first (what the few kernels
+      that keep one size's float code need, see :class:`Extent`);
     * the fields whose shape depends on the disparity range (``volume=True``: the cost
       volumes), so that kernels that touch no volume -- the median, phi's derivatives, the
-      upward and downward passes, the fit -- compile once per image size, whatever the
-      disparity range, instead of once per (size, range);
+      downward pass, the fit -- compile whatever the disparity range;
     * the *bucket* fields (``bucket=True``), whose shapes are those of the image's size
-      bucket (:func:`bucket_shape`), so that kernels that touch only them and read the
-      image's size at run time from a field of that tree -- the median's tree of merge
-      networks, the census transform -- compile once per bucket instead of once per size.
+      bucket (:func:`bucket_shape`), so that kernels that touch only them (and volumes of
+      the bucket's shape) and read the image's size at run time from an :class:`Extent` --
+      most kernels of a solve -- compile once per bucket instead of once per size.
 
     The SNode ids count the nodes declared before in the process, which depend neither on
     the range nor on the size.
@@ -258,8 +259,20 @@ class FieldPool:
         self._builders = [None, None, None]       # the size, volume and bucket trees
         self._trees = []
         self._shared = {}
+        self._loaders = []
         self.nbytes = 0
         self.fields = []
+
+    def extent(self, height, width):
+        """The pool's :class:`Extent` of ``height x width`` images (one per size, shared by
+        every user of the pool); ask before :meth:`finalize`, which loads it."""
+        return self.shared(("extent", int(height), int(width)),
+                           lambda: Extent(self, height, width))
+
+    def on_load(self, load):
+        """Call ``load()`` once the pool is finalised and after every :meth:`zero`: it
+        writes constants into fields (such as an :class:`Extent`'s size)."""
+        self._loaders.append(load)
 
     def shared(self, key, make):
         """The object that ``make()`` returned when this pool was first asked for ``key``:
@@ -316,18 +329,23 @@ class FieldPool:
 
     def finalize(self):
         self._trees = [b.finalize() for b in self._builders if b is not None]
+        for load in self._loaders:
+            load()
         return self
 
     def zero(self):
         """Set every field to 0, the state of a freshly finalised pool (one kernel for all
-        of them: ``fill`` would compile one per field)."""
+        of them: ``fill`` would compile one per field); the extents keep their sizes."""
         _zero_all(tuple(self.fields))
+        for load in self._loaders:
+            load()
 
     def destroy(self):
         for tree in self._trees:
             tree.destroy()
         self._trees = []
         self._shared = {}
+        self._loaders = []
         # Taichi lists the vector fields declared since its last kernel compile and reads
         # their shapes at the next one: a pool destroyed before any kernel ran would leave
         # freed SNodes in that list, and the next compile would crash the process
@@ -336,3 +354,59 @@ class FieldPool:
         if pending:
             mine = {id(f) for f in self.fields}
             runtime.matrix_fields = [f for f in pending if id(f) not in mine]
+
+
+@ti.data_oriented
+class Extent:
+    """The size of the images whose planes have the shape of their size bucket: ``H`` and
+    ``W`` for the host, and a field of the bucket tree that kernels read them from at run
+    time (:meth:`height`, :meth:`width`), so that their code holds nothing of the size and
+    compiles once per bucket (see :class:`FieldPool`).
+
+    Kernels write the ``H x W`` region of a plane (and its margins) only: what lies beyond
+    stays zero.  The per-iteration kernels loop over the whole bucket with compile-time
+    bounds and skip the rest (a loop with run-time bounds made Taichi's kernels up to twice
+    as slow).  :meth:`image` reads the region back and :meth:`padded` pads an
+    ``(H, W, ...)`` array to the bucket for ``from_numpy``.
+
+    A kernel whose float code must stay that of one size keeps ``H`` and ``W`` as
+    compile-time constants (and compiles once per size): Taichi compiles with LLVM's
+    fast-math reassociation, which orders a long sum by how its terms' addresses are
+    computed, so run-time sizes, or planes of the bucket's strides, can round some sums
+    differently (a few ulp).  Each kernel here was checked to give the results of kernels
+    compiled for one size, bit for bit, on whole solves at several sizes.
+    """
+
+    def __init__(self, pool, height, width):
+        self.H, self.W = int(height), int(width)
+        self.bucket = bucket_shape(self.H, self.W)
+        self.size = pool.field(ti.i32, (2,), bucket=True)
+        pool.on_load(self.load)
+
+    @ti.kernel
+    def _load(self, height: ti.i32, width: ti.i32):
+        self.size[0] = height
+        self.size[1] = width
+
+    def load(self):
+        """Write ``H`` and ``W`` into the field (the pool calls it)."""
+        self._load(self.H, self.W)
+
+    @ti.func
+    def height(self):
+        return self.size[0]
+
+    @ti.func
+    def width(self):
+        return self.size[1]
+
+    def image(self, f):
+        """The ``H x W`` region of a bucket-shaped field as a numpy array."""
+        return np.ascontiguousarray(f.to_numpy()[:self.H, :self.W])
+
+    def padded(self, array):
+        """``array`` (``(H, W, ...)``) zero-padded to the bucket's shape."""
+        array = np.asarray(array)
+        out = np.zeros(self.bucket + array.shape[2:], array.dtype)
+        out[:self.H, :self.W] = array
+        return out

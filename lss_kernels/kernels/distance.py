@@ -15,11 +15,14 @@ __all__ = ["DistanceTransform", "INF"]
 
 @ti.data_oriented
 class DistanceTransform:
-    """Squared EDT of a field of shape ``(n0, n1, n2)`` (2-D maps use ``n2 = 1``).
+    """Squared EDT of the ``(n0, n1, n2)`` corner of fields of shape ``shape`` (2-D maps use
+    ``n2 = 1``).
 
-    ``run(f)`` expects ``f = 0`` at features and ``INF`` elsewhere and overwrites it with the
-    squared distance (in voxel units, all axes weighted 1) to the nearest feature.  Lines are
-    processed in batches so that each of the three scratch buffers stays within
+    ``run(f, (n0, n1))`` expects ``f = 0`` at features and ``INF`` elsewhere in that corner
+    and overwrites it with the squared distance (in voxel units, all axes weighted 1) to the
+    nearest feature; ``n2`` is ``f``'s third axis, ``n0`` and ``n1`` are read at run time, so
+    the passes compile once for every ``n0 x n1`` of a size bucket (``shape``: the bucket's).
+    Lines are processed in batches so that each of the three scratch buffers stays within
     ``max_scratch`` elements (a line of length n takes n + 1).
     """
 
@@ -45,8 +48,7 @@ class DistanceTransform:
         self._tree.destroy()
 
     @ti.func
-    def _index(self, axis: ti.template(), line: ti.i32, i: ti.i32):
-        n0, n1, n2 = ti.static(self.shape)
+    def _index(self, axis: ti.template(), line: ti.i32, i: ti.i32, n1, n2: ti.template()):
         a = 0
         b = 0
         c = 0
@@ -59,13 +61,19 @@ class DistanceTransform:
         return a, b, c
 
     @ti.kernel
-    def _pass(self, f: ti.template(), axis: ti.template(), start: ti.i32, count: ti.i32):
-        n = ti.static(self.shape[axis])
+    def _pass(self, f: ti.template(), axis: ti.template(), start: ti.i32, count: ti.i32,
+              n0: ti.i32, n1: ti.i32):
+        n2 = ti.static(f.shape[2])
+        n = n2
+        if ti.static(axis == 0):
+            n = n0
+        elif ti.static(axis == 1):
+            n = n1
         for t in range(count):
             line = start + t
             o = t * (n + 1)                   # this line's stretch of the buffers
             for i in range(n):
-                a, b, c = self._index(axis, line, i)
+                a, b, c = self._index(axis, line, i, n1, n2)
                 self.g[o + i] = f[a, b, c]
             # lower envelope of the parabolas rooted at (q, g[q]); z[0] = -INF is a sentinel
             # that no intersection reaches, since |g| <= INF keeps |s| < INF / 2 + n
@@ -91,16 +99,17 @@ class DistanceTransform:
                 while self.z[o + k + 1] < ti.cast(q, ti.f32):
                     k += 1
                 p = self.v[o + k]
-                a, b, c = self._index(axis, line, q)
+                a, b, c = self._index(axis, line, q, n1, n2)
                 f[a, b, c] = ti.min(ti.cast((q - p) * (q - p), ti.f32) + self.g[o + p], INF)
 
-    def run(self, f) -> None:
-        n0, n1, n2 = self.shape
-        for axis in range(3):
-            n = self.shape[axis]
+    def run(self, f, size) -> None:
+        """The transform of the ``size`` (``(n0, n1)``) corner of ``f``, in place."""
+        n0, n1 = (int(v) for v in size)
+        n2 = f.shape[2]
+        for axis, n in enumerate((n0, n1, n2)):
             if n == 1:
                 continue
             lines = n0 * n1 * n2 // n
             batch = max(1, self.size // (n + 1))
             for start in range(0, lines, batch):
-                self._pass(f, axis, start, min(batch, lines - start))
+                self._pass(f, axis, start, min(batch, lines - start), n0, n1)

@@ -67,13 +67,18 @@ class GaussianFilters:
 
     def __init__(self, pool, height, width, sigma):
         self.H, self.W = int(height), int(width)
+        self.extent = pool.extent(self.H, self.W)
         g, g1, g2 = gaussian_taps(sigma)
         self.half = (len(g) - 1) // 2
         self.tap_values = np.stack([g, g1, g2]).astype(np.float32).tolist()
         self.lanes = lanes.lanes_for_arch()
-        self.blocks = lanes.block_count(self.W, self.lanes)
-        # the row pass's output per order, with ``half`` reflected rows above and below
-        self.scratch = [lanes.lane_plane(pool, self.H, self.W, self.lanes, self.half)
+        # the row pass's output per order, with ``half`` reflected rows above and below, in
+        # the bucket's shape (the image's size is read at run time)
+        bucket_h, bucket_w = self.extent.bucket
+        # the blocks of the bucket's rows: the row pass's loop (over the image's, at run time)
+        self.bucket_blocks = (bucket_h, lanes.block_count(bucket_w, self.lanes))
+        self.scratch = [lanes.lane_plane(pool, bucket_h, bucket_w, self.lanes, self.half,
+                                         bucket=True)
                         for _ in range(3)]
 
     @ti.func
@@ -100,14 +105,15 @@ class GaussianFilters:
         block's window (its pixels and ``half`` on either side) is read once, indices
         reflected only for the blocks within the half-width of the border."""
         n = ti.static(self.lanes + 2 * self.half)
+        width = self.extent.width()
         x0 = b * self.lanes - self.half
         window = ti.Vector.zero(ti.f32, n)
-        if 0 <= x0 and x0 + n <= self.W:
+        if 0 <= x0 and x0 + n <= width:
             for k in ti.static(range(n)):
                 window[k] = src[y, x0 + k]
         else:           # a loop, not unrolled: this branch would double the compile time
             for k in range(n):
-                window[k] = src[y, reflect(x0 + k, self.W)]
+                window[k] = src[y, reflect(x0 + k, width)]
         centre = self._shifted(window, 0)
         out = [ti.static(float(self.tap_values[o][self.half])) * centre
                for o in ti.static(orders)]
@@ -135,21 +141,21 @@ class GaussianFilters:
         return out
 
     @ti.func
-    def _put(self, scratch: ti.template(), y, b, value):
+    def _put(self, scratch: ti.template(), y, b, value, height):
         """Block ``b`` of row ``y`` of the scratch <- value, and of the margin rows that
-        reflect row y."""
+        reflect row y (``height``: the image's rows)."""
         scratch[y, b] = value
-        if ti.static(self.H >= self.half):
+        if height >= self.half:
             if y < self.half:
                 scratch[-1 - y, b] = value
-            if y >= self.H - self.half:
-                scratch[2 * self.H - 1 - y, b] = value
+            if y >= height - self.half:
+                scratch[2 * height - 1 - y, b] = value
         else:           # images fewer rows high than ``half``: the reflection repeats
             for m in range(-self.half, 0):
-                if reflect(m, self.H) == y:
+                if reflect(m, height) == y:
                     scratch[m, b] = value
-            for m in range(self.H, self.H + self.half):
-                if reflect(m, self.H) == y:
+            for m in range(height, height + self.half):
+                if reflect(m, height) == y:
                     scratch[m, b] = value
 
     @ti.func
@@ -157,7 +163,10 @@ class GaussianFilters:
         """The row pass of ``src`` (an ``(H, W)`` plane) for each of ``orders`` (ascending,
         from 0) into the scratch of that order, a block of pixels at a time (a parallel loop:
         call it at kernel scope)."""
-        for y, b in ti.ndrange(self.H, self.blocks):
-            out = self.row_filters(src, y, b, orders)
-            for j in ti.static(range(len(orders))):
-                self._put(self.scratch[orders[j]], y, b, out[j])
+        height = self.extent.height()
+        blocks = (self.extent.width() + self.lanes - 1) // self.lanes
+        for y, b in ti.ndrange(*ti.static(self.bucket_blocks)):
+            if y < height and b < blocks:
+                out = self.row_filters(src, y, b, orders)
+                for j in ti.static(range(len(orders))):
+                    self._put(self.scratch[orders[j]], y, b, out[j], height)

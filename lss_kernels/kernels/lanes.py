@@ -32,23 +32,25 @@ def block_count(width, lanes):
     return (int(width) + lanes - 1) // lanes
 
 
-def lane_plane(pool, height, width, lanes, margin_rows=0):
+def lane_plane(pool, height, width, lanes, margin_rows=0, bucket=False):
     """A lane plane of ``height`` rows (plus ``margin_rows`` above and below, at negative
-    and past-the-end row indices) and ``width`` pixels, in blocks of ``lanes``."""
+    and past-the-end row indices) and ``width`` pixels, in blocks of ``lanes``; ``bucket``:
+    in the pool's bucket tree (``height`` and ``width`` those of the bucket)."""
     shape = (int(height) + 2 * margin_rows, block_count(width, lanes))
     offset = (-margin_rows, 0) if margin_rows else None
-    return pool.vector(lanes, ti.f32, shape, offset=offset)
+    return pool.vector(lanes, ti.f32, shape, offset=offset, bucket=bucket)
 
 
 @ti.func
-def block(f: ti.template(), y, b, lanes: ti.template()):
+def block(f: ti.template(), y, b, lanes: ti.template(), width):
     """Block ``b`` of row ``y`` (``lanes`` pixels, as a vector) of a lane plane, or gathered
-    from a plain scalar plane (pixels past its right edge repeat the last one)."""
+    from a plain scalar plane of an image ``width`` pixels wide (pixels past its right edge
+    repeat the last one)."""
     value = ti.Vector.zero(ti.f32, lanes)
     if ti.static(isinstance(f, ti.MatrixField)):
         value = f[y, b]
     else:
-        last = f.shape[1] - 1
+        last = width - 1
         value = ti.Vector([f[y, ti.min(b * lanes + lane, last)]
                            for lane in ti.static(range(lanes))])
     return value
@@ -67,10 +69,9 @@ def take(window, start: ti.template(), lanes: ti.template()):
     return ti.Vector([window[start + lane] for lane in ti.static(range(lanes))])
 
 
-def to_image(f, width, margin_rows=0):
-    """A lane plane as a float32 ``(H, width)`` array (without its margin rows)."""
+def to_image(f, height, width, margin_rows=0):
+    """The first ``height`` rows and ``width`` pixels of a lane plane as a float32 array
+    (without its margin rows)."""
     blocks = f.to_numpy()
-    rows = blocks.reshape(blocks.shape[0], -1)[:, :width]
-    if margin_rows:
-        rows = rows[margin_rows:-margin_rows]
+    rows = blocks.reshape(blocks.shape[0], -1)[margin_rows:margin_rows + height, :width]
     return np.ascontiguousarray(rows, dtype=np.float32)

@@ -342,22 +342,28 @@ class MedianFilter:
 
     Three kernels: :meth:`_sort` (stage 1: the sorted window columns, and the plane's size,
     into the bucket fields of a :class:`_BucketTree`), the tree's ``_bucket_median`` (stage
-    2, the merge networks: seconds to compile for ``size`` 7, once per size bucket) and
-    :meth:`_store` (stage 3: the medians into the sink).  Only the first and the last, small,
-    compile once per image size.
+    2, the merge networks: seconds to compile for ``size`` 7) and :meth:`_store` (stage 3:
+    the medians into the sink).  All three read the image's size at run time from the pool's
+    :class:`~lss_kernels.kernels.backend.Extent`: they compile once per size bucket when the
+    planes they read and the sink's fields are in the bucket tree.
     """
 
     def __init__(self, pool, height, width, size):
         self.H, self.W = int(height), int(width)
         self.median_size = int(size)
         self.lanes = lanes.lanes_for_arch()
+        self.extent = pool.extent(self.H, self.W)
         if self.median_size > 1:
             self.bucket = bucket_shape(self.H, self.W)
             key = ("median", self.median_size, self.lanes, self.bucket)
             self._tree = pool.shared(key, lambda: _BucketTree(pool, self.bucket,
                                                               self.median_size, self.lanes))
-            self._row_blocks = lanes.block_count(self.H, self.lanes)
-            self._tiles = lanes.block_count(self.W, self._tree.network[1])
+            # the loops of the sort and the store run over the bucket's blocks of rows and
+            # columns, skipping those past the image's (compile-time bounds: no run-time
+            # division per index)
+            tile = self._tree.network[1]
+            self._bucket_rows = lanes.block_count(self.bucket[0], self.lanes)
+            self._bucket_columns = lanes.block_count(self.bucket[1], tile) * tile
 
     @ti.func
     def _sort_columns(self, src: ti.template()):
@@ -368,10 +374,15 @@ class MedianFilter:
         hundred comparators cost more than the kernel itself."""
         k, L, tile = ti.static(self.median_size, self.lanes, self._tree.network[1])
         column_ops = ti.static(self._tree.network[0])
-        for yb, x in ti.ndrange(self._row_blocks, (-(k // 2), self._tiles * tile + k // 2)):
-            xs = reflect(x, self.W)
+        height, width = self.extent.height(), self.extent.width()
+        row_blocks = (height + L - 1) // L
+        tiles = (width + tile - 1) // tile
+        for yb, x in ti.ndrange(self._bucket_rows, (-(k // 2), self._bucket_columns + k // 2)):
+            if yb >= row_blocks or x >= tiles * tile + k // 2:
+                continue
+            xs = reflect(x, width)
             # the rows of the block's windows: k - 1 more than the block
-            window = [src[reflect(yb * L + i - k // 2, self.H), xs]
+            window = [src[reflect(yb * L + i - k // 2, height), xs]
                       for i in ti.static(range(L + k - 1))]
             v = [lanes.take(window, r, L) for r in ti.static(range(k))]
             self._tree.apply(v, column_ops)
@@ -380,32 +391,34 @@ class MedianFilter:
 
     @ti.kernel
     def _sort(self, src: ti.template()):
-        """Per size, stage 1: the sorted window columns of ``src`` (an ``(H, W)`` plane) and
-        the plane's size, into the bucket.  Sorting here rather than in the bucket kernel
-        saves a copy of the plane into the bucket: 0.3 ms of a 15 ms iteration at 400x300 on
-        the 2-core CPU, for a column sort that compiles in a fraction of a second."""
-        self._tree.size[0] = self.H
-        self._tree.size[1] = self.W
+        """Stage 1: the sorted window columns of ``src`` (an ``(H, W)`` plane) and the
+        plane's size, into the bucket.  Sorting here rather than in the tree's kernel saves a
+        copy of the plane into the bucket: 0.3 ms of a 15 ms iteration at 400x300 on the
+        2-core CPU."""
+        self._tree.size[0] = self.extent.height()
+        self._tree.size[1] = self.extent.width()
         self._sort_columns(src)
 
     @ti.kernel
     def _store(self, sink: ti.template()):
-        """Per size, stage 3: the medians of every block of rows, pixel by pixel, into the
-        sink."""
+        """Stage 3: the medians of every block of rows, pixel by pixel, into the sink."""
         sink.begin()
         L = ti.static(self.lanes)
-        for yb, x in ti.ndrange(self._row_blocks, self.W):
+        height, width = self.extent.height(), self.extent.width()
+        for yb, x in ti.ndrange(self._bucket_rows, self.bucket[1]):
+            if yb >= (height + L - 1) // L or x >= width:
+                continue
             medians = self._tree.medians[yb, x]
             for lane in ti.static(range(L)):
                 y = yb * L + lane
-                if y < self.H:
+                if y < height:
                     sink.store(y, x, medians[lane])
 
     @ti.kernel
     def _copy(self, src: ti.template(), sink: ti.template()):
         """The 1x1 median: ``src`` itself."""
         sink.begin()
-        for y, x in src:
+        for y, x in ti.ndrange(self.extent.height(), self.extent.width()):
             sink.store(y, x, src[y, x])
 
     def run(self, src, sink):

@@ -4,6 +4,7 @@
 ``costs``          boundary costs B_occ, B_mono and their combination B (Sec. 4, Eq. 1)
 ``hierarchy``      the cooperative patch levels: matching costs per patch, the upward relays
                    and the downward consensus (Sec. 3, Eq. 7)
+``patches``        the geometry of the hierarchy's levels: children, margins, relay columns
 ``messages``       per-patch validity and disparity messages (Eqs. 4, 5)
 ``shapes``         the quadratic surfaces Theta_1, Theta_2 by a hierarchical reduction of the
                    normal equations (Eq. 8)

@@ -13,7 +13,9 @@ upward pass's first product).  Here:
 * ``B = alpha_occ B_occ + alpha_mono B_mono + alpha_const``, read at Theta_1(x, y) with linear
   interpolation between integer disparities.
 
-Frame: cyclopean; volumes ``(H, W, c_max)`` indexed ``[y, x, c - 1]``.
+Frame: cyclopean; volumes ``(H, W, c_max)`` indexed ``[y, x, c - 1]``.  Planes and volumes
+have the shape of the image's size bucket (the volumes by ``c_max``), and the kernels read
+``H`` and ``W`` at run time from the pool's :class:`~lss_kernels.kernels.backend.Extent`.
 """
 import math
 
@@ -38,13 +40,14 @@ class BoundaryCosts:
 
     def __init__(self, pool, height, width, c_max):
         self.H, self.W, self.C = int(height), int(width), int(c_max)
-        H, W, C = self.H, self.W, self.C
+        self.extent = pool.extent(self.H, self.W)
+        (H, W), C = self.extent.bucket, self.C
         self.b_occ = pool.field(ti.f32, (H, W, C), order=ROWS_DISPARITIES_COLUMNS,
                                 volume=True)
-        self.edge_left = pool.field(ti.f32, (H, W))
-        self.edge_right = pool.field(ti.f32, (H, W))
-        self._max = pool.field(ti.f32, ())
-        self.alpha = pool.vector(3, ti.f32, ())
+        self.edge_left = pool.field(ti.f32, (H, W), bucket=True)
+        self.edge_right = pool.field(ti.f32, (H, W), bucket=True)
+        self._max = pool.field(ti.f32, (), bucket=True)
+        self.alpha = pool.vector(3, ti.f32, (), bucket=True)
         # scratch, kept for the solver's life: destroying an SNode tree makes Taichi drop
         # every compiled kernel, which a reset solver would then compile again
         rows = max(1, -(-H * min(C, CHUNK) // C))               # B_occ, a block of rows at a time
@@ -57,8 +60,9 @@ class BoundaryCosts:
         """Allocate B_occ's distance-transform scratch; call once the pool is finalised.
         B_mono borrows the level set's 2-D transform ``distance`` and its ``(H, W, 1)``
         ``distance_map`` (set-up runs before any re-initialisation)."""
-        budget = 2 * self.H * self.W              # elements per line buffer: two planes
-        self._edt3 = DistanceTransform((self.H, self.W, self.C), max_scratch=budget)
+        H, W = self.extent.bucket
+        budget = 2 * H * W                        # elements per line buffer: two planes
+        self._edt3 = DistanceTransform((H, W, self.C), max_scratch=budget)
         self._edt2, self._dist2 = distance, distance_map
 
     def destroy(self):
@@ -78,7 +82,8 @@ class BoundaryCosts:
         ``taps`` is a tuple (compile-time constants): away from the border the sum runs
         unrolled and unclamped; near it, as a loop with clamped indices."""
         half = ti.static((len(taps) - 1) // 2)
-        n = ti.static(self.H if axis == 0 else self.W)
+        height, width = self.extent.height(), self.extent.width()
+        n = height if ti.static(axis == 0) else width
         pos = y if ti.static(axis == 0) else x
         s = 0.0
         if half <= pos < n - half:
@@ -91,37 +96,40 @@ class BoundaryCosts:
             weights = ti.Vector(taps)
             for i in range(-half, half + 1):
                 if ti.static(axis == 0):
-                    s += weights[i + half] * src[ti.min(ti.max(y + i, 0), self.H - 1), x, k]
+                    s += weights[i + half] * src[ti.min(ti.max(y + i, 0), height - 1), x, k]
                 else:
-                    s += weights[i + half] * src[y, ti.min(ti.max(x + i, 0), self.W - 1), k]
+                    s += weights[i + half] * src[y, ti.min(ti.max(x + i, 0), width - 1), k]
         return s
 
     @ti.kernel
     def _smooth_y(self, src: ti.template(), taps: ti.template(), y0: ti.i32):
         """Rows y0 .. of src (as many as the chunk holds), smoothed along y, into the chunk
         (the block and its filter reach are read in their memory order)."""
-        for r, x, k in self._chunk:
-            if y0 + r < self.H:
+        for r, k, x in ti.ndrange(self._chunk.shape[0], self.C, self.extent.width()):
+            if y0 + r < self.extent.height():
                 self._chunk[r, x, k] = self._correlate(src, taps, y0 + r, x, k, 0)
 
     @ti.kernel
     def _occ_features(self, taps: ti.template(), threshold: ti.f32, y0: ti.i32):
         """B_occ's features of those rows: |d/dx of the chunk| above ``threshold``."""
-        for r, x, k in self._chunk:
-            if y0 + r < self.H:
+        for r, k, x in ti.ndrange(self._chunk.shape[0], self.C, self.extent.width()):
+            if y0 + r < self.extent.height():
                 s = self._correlate(self._chunk, taps, r, x, k, 1)
                 self.b_occ[y0 + r, x, k] = 0.0 if ti.abs(s) > threshold else INF
 
     @ti.kernel
     def _sqrt_normalise(self, vol: ti.template()):
+        """The ``H x W`` region of ``vol`` (squared distances, in memory order) <- the
+        distances over their largest finite one, 1 where there is none."""
         self._max[None] = 0.0
-        for I in ti.grouped(vol):
-            if vol[I] < INF * 0.5:
-                ti.atomic_max(self._max[None], ti.sqrt(vol[I]))
+        height, width = self.extent.height(), self.extent.width()
+        for y, k, x in ti.ndrange(height, self.C, width):
+            if vol[y, x, k] < INF * 0.5:
+                ti.atomic_max(self._max[None], ti.sqrt(vol[y, x, k]))
         m = self._max[None]
-        for I in ti.grouped(vol):
-            v = vol[I]
-            vol[I] = ti.min(ti.sqrt(v) / m, 1.0) if (m > 0 and v < INF * 0.5) else 1.0
+        for y, k, x in ti.ndrange(height, self.C, width):
+            v = vol[y, x, k]
+            vol[y, x, k] = ti.min(ti.sqrt(v) / m, 1.0) if (m > 0 and v < INF * 0.5) else 1.0
 
     def build_occ(self, cost_level1, sigma, threshold):
         """B_occ from the size-3 normalised cost volume (``cost_level1`` may carry a margin;
@@ -137,18 +145,19 @@ class BoundaryCosts:
         for y0 in range(0, self.H, self._chunk.shape[0]):
             self._smooth_y(cost_level1, g, y0)
             self._occ_features(dg, float(threshold), y0)
-        self._edt3.run(self.b_occ)
+        self._edt3.run(self.b_occ, (self.H, self.W))
         self._sqrt_normalise(self.b_occ)
 
     # -------------------------------------------------------------------- B_mono
     @ti.kernel
     def _sobel_edges(self, img: ti.template(), out: ti.template(), threshold: ti.f32):
-        for y, x in out:
+        height, width = self.extent.height(), self.extent.width()
+        for y, x in ti.ndrange(height, width):
             gx = 0.0
             gy = 0.0
             for dy, dx in ti.static(ti.ndrange((-1, 2), (-1, 2))):
-                yy = ti.min(ti.max(y + dy, 0), self.H - 1)
-                xx = ti.min(ti.max(x + dx, 0), self.W - 1)
+                yy = ti.min(ti.max(y + dy, 0), height - 1)
+                xx = ti.min(ti.max(x + dx, 0), width - 1)
                 p = img[yy, xx]
                 grey = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
                 wx = ti.static(dx * (2 - abs(dy)))
@@ -161,11 +170,12 @@ class BoundaryCosts:
     @ti.kernel
     def _edge_score(self, dist2: ti.template(), out: ti.template()):
         self._max[None] = 0.0
-        for y, x, _ in dist2:
+        height, width = self.extent.height(), self.extent.width()
+        for y, x in ti.ndrange(height, width):
             if dist2[y, x, 0] < INF * 0.5:
                 ti.atomic_max(self._max[None], ti.sqrt(dist2[y, x, 0]))
         m = self._max[None]
-        for y, x, _ in dist2:
+        for y, x in ti.ndrange(height, width):
             d2 = dist2[y, x, 0]
             e = 0.0
             if d2 < INF * 0.5:
@@ -177,12 +187,12 @@ class BoundaryCosts:
         for img, out in ((left, self.edge_left), (right, self.edge_right)):
             self._sobel_edges(img, out, float(threshold))
             self._copy_to_3d(out, self._dist2)
-            self._edt2.run(self._dist2)
+            self._edt2.run(self._dist2, (self.H, self.W))
             self._edge_score(self._dist2, out)
 
     @ti.kernel
     def _copy_to_3d(self, src: ti.template(), dst: ti.template()):
-        for y, x in src:
+        for y, x in ti.ndrange(self.extent.height(), self.extent.width()):
             dst[y, x, 0] = src[y, x]
 
     def build(self, cost_level1, left, right, params):
@@ -197,7 +207,7 @@ class BoundaryCosts:
         """B_mono at integer disparity index k (c = k + 1); zero edge score off the image."""
         c = k + 1
         e = 0.0
-        if x + c < self.W:
+        if x + c < self.extent.width():
             e += self.edge_left[y, x + c]
         if x - c >= 0:
             e += self.edge_right[y, x - c]

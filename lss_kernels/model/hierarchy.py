@@ -22,73 +22,25 @@ carry a margin of patch centres outside the image because a parent near the bord
 children centred there, and level 1 at least one patch reach (the pixels' consensus reads
 it around them); the per-iteration relays are lane planes whose columns extend the margins
 to whole blocks (:func:`column_spans`).
+
+Planes and volumes have the shape of the image's size bucket (and margins), and most kernels
+read ``H`` and ``W`` at run time from the pool's :class:`~lss_kernels.kernels.backend.Extent`,
+so they compile once per bucket.  Two compile once per image size, with the size's constants
+and its own shapes: the upward pass (:meth:`PatchHierarchy.upward`) and the set-up's sums of
+children (:meth:`PatchHierarchy._cost_from_children`).  Taichi compiles with LLVM's fast-math
+reassociation, which orders a sum of many terms by how their addresses are computed: the
+same code with run-time sizes, or over planes of the bucket's strides, sums their patches in
+other orders at some sizes (a few ulp), and the results must stay those of kernels compiled
+for one size.
 """
 import numpy as np
 import taichi as ti
 
 from ..kernels import lanes
 from ..kernels.backend import ROWS_DISPARITIES_COLUMNS
+from .patches import Level, column_spans, level_geometry
 
 __all__ = ["Level", "PatchHierarchy", "PatchLevel", "level_geometry"]
-
-
-class Level:
-    """Geometry of one level: patch side ``size``, the offsets of its children's centres
-    (one axis; the children are the product of these offsets in y and x), and ``margin``, the
-    number of patch centres kept outside the image on each side."""
-
-    def __init__(self, size, half, offsets, margin):
-        self.size, self.half, self.offsets, self.margin = size, half, tuple(offsets), margin
-
-    def __repr__(self):
-        return (f"Level(size={self.size}, offsets={self.offsets}, margin={self.margin})")
-
-
-def level_geometry(sizes):
-    """Levels for the patch sides ``sizes`` (e.g. ``(3, 9, 18)``).
-
-    A patch of side ``s`` centred on ``x`` covers ``[x - s // 2, x - s // 2 + s - 1]``; its
-    children (side ``s'``) are centred on ``x + o`` with ``o = -s // 2 + j s' + s' // 2``,
-    ``j = 0 .. s / s' - 1``.
-    """
-    sizes = (1,) + tuple(sizes)
-    levels = []
-    for s_child, s in zip(sizes, sizes[1:]):
-        offs = [-(s // 2) + j * s_child + s_child // 2 for j in range(s // s_child)]
-        levels.append(Level(s, s // 2, offs, 0))
-    margin = 0
-    for lev_idx in range(len(levels) - 1, -1, -1):
-        levels[lev_idx].margin = margin
-        margin += max(abs(o) for o in levels[lev_idx].offsets)
-    # the pixels read level 1's centres around them (the consensus): a single level needs
-    # that margin too
-    levels[0].margin = max(levels[0].margin, max(abs(o) for o in levels[0].offsets))
-    return levels
-
-
-def column_spans(levels, width, lanes_per_block):
-    """The columns every level's lane planes hold, ``(left, right)``: patch centres
-    ``x = -left .. right - 1``, both multiples of ``lanes_per_block``.
-
-    The top level holds the image's blocks.  Going down, each level holds the reach of its
-    parent's children beyond the parent's columns, rounded out to whole blocks (with one
-    pixel per block: exactly the levels' margins); level 1 also reaches the pixels' blocks
-    and one reach of its own beyond them (the consensus reads it there).  Patch centres
-    beyond a level's margin only ever hold zero relays, and their sums and extremes are
-    never read."""
-    L = int(lanes_per_block)
-    round_up = lambda v: -(-v // L) * L
-    spans = [None] * len(levels)
-    left, right = 0, round_up(width)
-    spans[-1] = (left, right)
-    for i in range(len(levels) - 2, -1, -1):
-        reach = max(abs(o) for o in levels[i + 1].offsets)
-        left, right = round_up(left + reach), round_up(right + reach)
-        spans[i] = (left, right)
-    reach = max(abs(o) for o in levels[0].offsets)
-    left, right = spans[0]
-    spans[0] = (max(left, round_up(reach)), max(right, round_up(round_up(width) + reach)))
-    return spans
 
 
 @ti.data_oriented
@@ -105,13 +57,25 @@ class PatchLevel:
     :mod:`lss_kernels.model.messages` (``key``, ``below``, ``above``, ``d_below``,
     ``d_above``; lane planes over the in-image centres), and ``d_p``, ``sigma_p``, ``valid``
     (``(H, W)``, written only on request).
+
+    Every field has the shape of the image's size bucket (``extent.bucket``) with its
+    margins; the relays' columns are ``span`` (:func:`column_spans` of the image's width)
+    within ``bucket_span`` (of the bucket's).  ``columns``: ``span`` in blocks, as the blocks
+    left of the image and those past its last block: both are the bucket's too, so kernels
+    find the span at run time from the image's blocks.  ``domain``: the relays' patch
+    centres of the image's size in a plane of that shape, what the upward pass loops over.
     """
 
-    def __init__(self, pool, geometry, span, height, width, c_max, lanes_per_block, index):
+    def __init__(self, pool, geometry, span, bucket_span, extent, c_max, lanes_per_block,
+                 index):
         self.size, self.half = geometry.size, geometry.half
         self.offsets, self.margin = geometry.offsets, geometry.margin
         self.span, self.index = span, index
-        H, W, C, L, m = height, width, c_max, lanes_per_block, geometry.margin
+        (H, W), C, L, m = extent.bucket, c_max, lanes_per_block, geometry.margin
+        past = lambda sp, width: (sp[1] - lanes.block_count(width, L) * L) // L
+        self.columns = (span[0] // L, past(span, extent.W))
+        assert self.columns == (bucket_span[0] // L, past(bucket_span, W))
+        span = bucket_span
         # Level 1 is also M of the Eq. 2 step, read at Theta_j per pixel: rows, disparities,
         # columns in memory; the patch levels are scanned along c per patch (messages)
         self.cost = pool.field(ti.f32, (H + 2 * m, W + 2 * m, C), offset=(-m, -m, 0),
@@ -121,20 +85,23 @@ class PatchLevel:
         def relay():
             left, right = span
             return pool.vector(L, ti.f32, (H + 2 * m, (left + right) // L),
-                               offset=(-m, -left // L))
+                               offset=(-m, -left // L), bucket=True)
 
         def cache(dtype=ti.f32):
-            return pool.vector(L, dtype, (H, lanes.block_count(W, L)))
+            return pool.vector(L, dtype, (H, lanes.block_count(W, L)), bucket=True)
 
         self.d_sum, self.phi_max, self.phi_plus_min = relay(), relay(), relay()
         self.relay_a, self.relay_b = relay(), relay()
         self.key = cache(ti.i32)
         self.below, self.above, self.d_below, self.d_above = (cache() for _ in range(4))
-        self.d_p = pool.field(ti.f32, (H, W))
-        self.sigma_p = pool.field(ti.f32, (H, W))
-        self.valid = pool.field(ti.i32, (H, W))
-        self._image_rows = (m, m + H)
-        self._image_columns = (span[0], span[0] + W)
+        self.d_p = pool.field(ti.f32, (H, W), bucket=True)
+        self.sigma_p = pool.field(ti.f32, (H, W), bucket=True)
+        self.valid = pool.field(ti.i32, (H, W), bucket=True)
+        self._image_rows = (m, m + extent.H)
+        self._image_columns = (span[0], span[0] + extent.W)
+        left, right = self.span
+        self.domain = pool.field(ti.u8, (extent.H + 2 * m, (left + right) // L),
+                                 offset=(-m, -left // L))
 
     def image(self, plane):
         """The in-image patch centres of one of this level's lane planes (``d_sum``,
@@ -175,20 +142,27 @@ class PatchHierarchy:
 
     def __init__(self, pool, height, width, c_max, sizes):
         self.H, self.W, self.C = int(height), int(width), int(c_max)
-        H, W, C = self.H, self.W, self.C
+        self.extent = pool.extent(self.H, self.W)
+        (H, W), C = self.extent.bucket, self.C
         # the per-iteration relays are lane planes (blocks of ``lanes`` patch centres along
         # x; see :mod:`lss_kernels.kernels.lanes`): the upward and downward stencils run a
         # block per loop index.  Columns -left .. right - 1 of :func:`column_spans`
         self.lanes = lanes.lanes_for_arch()
-        self.image_blocks = lanes.block_count(W, self.lanes)
+        self.image_blocks = lanes.block_count(self.W, self.lanes)
+        # the pixels' blocks of the bucket: loops over the image's blocks run over these and
+        # skip the rest (compile-time bounds: no run-time division per index)
+        self.bucket_blocks = (H, lanes.block_count(W, self.lanes))
         geometry = level_geometry(sizes)
-        spans = column_spans(geometry, W, self.lanes)
-        self.levels = [PatchLevel(pool, g, span, H, W, C, self.lanes, i)
-                       for i, (g, span) in enumerate(zip(geometry, spans))]
-        self.precision = pool.field(ti.f32, (H, W))       # 1 / sigma^2
-        self.consensus_mean = pool.field(ti.f32, (H, W))  # d-bar, cyclopean units
-        self._lo = pool.field(ti.f32, ())
-        self._hi = pool.field(ti.f32, ())
+        spans = zip(column_spans(geometry, self.W, self.lanes),
+                    column_spans(geometry, W, self.lanes))
+        self.levels = [PatchLevel(pool, g, span, bucket_span, self.extent, C, self.lanes, i)
+                       for i, (g, (span, bucket_span)) in enumerate(zip(geometry, spans))]
+        # the upward pass's copies of D, phi and phi(x + delta_theta), in the size's own shape
+        self._upward_planes = [pool.field(ti.f32, (self.H, self.W)) for _ in range(3)]
+        self.precision = pool.field(ti.f32, (H, W), bucket=True)       # 1 / sigma^2
+        self.consensus_mean = pool.field(ti.f32, (H, W), bucket=True)  # d-bar, cyclopean
+        self._lo = pool.field(ti.f32, (), bucket=True)
+        self._hi = pool.field(ti.f32, (), bucket=True)
         self.curve = pool.field(ti.f32, (C,), volume=True)
         #: How many times the cost volumes were built (the message cache depends on them).
         self.cost_version = 0
@@ -201,21 +175,45 @@ class PatchHierarchy:
 
     # ------------------------------------------------------------------ set-up (upward costs)
     @ti.func
-    def _in_image_count(self, size: ti.template(), y, x):
+    def _in_image_count(self, size: ti.template(), y, x, height, width):
         """In-image pixels of the patch of side ``size`` centred on (y, x) (``x`` may be a
         vector of centres): its square ``[c - size // 2, c - size // 2 + size - 1]`` per axis,
         clipped to the image; 0 for a patch wholly outside.  A parent's count is the sum of
         its children's, since the children tile it."""
         h = ti.static(size // 2)
-        rows = ti.max(ti.min(y - h + size - 1, self.H - 1) - ti.max(y - h, 0) + 1, 0)
-        cols = ti.max(ti.min(x - h + size - 1, self.W - 1) - ti.max(x - h, 0) + 1, 0)
+        rows = ti.max(ti.min(y - h + size - 1, height - 1) - ti.max(y - h, 0) + 1, 0)
+        cols = ti.max(ti.min(x - h + size - 1, width - 1) - ti.max(x - h, 0) + 1, 0)
         return rows * cols
+
+    @ti.func
+    def image_blocks_now(self):
+        """Blocks of lanes that cover a row of the image (run time)."""
+        return (self.extent.width() + self.lanes - 1) // self.lanes
+
+    @ti.func
+    def _volume(self, level: ti.template()):
+        """The ``ti.ndrange`` bounds of a level's volume, its margins included (``y, x,
+        k``)."""
+        m = ti.static(level.margin)
+        H, W = self.extent.height(), self.extent.width()
+        return (-m, H + m), (-m, W + m), (0, self.C)
+
+    @ti.func
+    def _size(self, fixed: ti.template()):
+        """The image's ``(H, W, blocks)``: read at run time, or with ``fixed`` the
+        compile-time constants of this size (the kernel then compiles once per size)."""
+        if ti.static(fixed):
+            return ti.static(self.H, self.W, self.image_blocks)
+        else:
+            return self.extent.height(), self.extent.width(), self.image_blocks_now()
 
     @ti.kernel
     def _cost_from_pixels(self, matcher: ti.template(), left: ti.template(),
-                          right: ti.template(), dst: ti.template(), offs: ti.template()):
-        H, W = self.H, self.W
-        for y, x, k in dst:
+                          right: ti.template(), level: ti.template()):
+        """Level 1's volume (in its memory order: rows, disparities, columns)."""
+        H, W = self.extent.height(), self.extent.width()
+        dst, offs, m = ti.static(level.cost, level.offsets, level.margin)
+        for y, k, x in ti.ndrange((-m, H + m), self.C, (-m, W + m)):
             c = k + 1
             total = 0.0
             n = 0
@@ -230,25 +228,30 @@ class PatchHierarchy:
             dst[y, x, k] = total / ti.max(n, 1)
 
     @ti.kernel
-    def _cost_from_children(self, src: ti.template(), child_size: ti.template(),
-                            dst: ti.template(), offs: ti.template()):
+    def _cost_from_children(self, child: ti.template(), level: ti.template()):
+        """A level's volume from its children's (per image size: the counts are the size's
+        constants; see the module).  Its bucket's patches past the image's margins get
+        values that nothing reads."""
+        src, child_size = ti.static(child.cost, child.size)
+        dst, offs = ti.static(level.cost, level.offsets)
         for y, x, k in dst:
             total = 0.0
             n = 0
             for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
                 cy = y + offs[jy]
                 cx = x + offs[jx]
-                m = self._in_image_count(child_size, cy, cx)
+                m = self._in_image_count(child_size, cy, cx, self.H, self.W)
                 total += src[cy, cx, k] * m
                 n += m
             dst[y, x, k] = total / ti.max(n, 1)
 
     @ti.kernel
-    def _normalise(self, vol: ti.template()):
+    def _normalise(self, level: ti.template()):
         """Min-max normalise a level's volume to [0, 1] over its in-image patches."""
+        vol = ti.static(level.cost)
         self._lo[None] = 1e30
         self._hi[None] = -1e30
-        for y, x in ti.ndrange(self.H, self.W):
+        for y, x in ti.ndrange(self.extent.height(), self.extent.width()):
             # a patch's extremes first: one atomic per patch, not one per candidate
             lo = vol[y, x, 0]
             hi = lo
@@ -259,7 +262,7 @@ class PatchHierarchy:
             ti.atomic_max(self._hi[None], hi)
         lo = self._lo[None]
         scale = 1.0 / ti.max(self._hi[None] - lo, 1e-12)
-        for y, x, k in vol:
+        for y, x, k in ti.ndrange(*self._volume(level)):
             vol[y, x, k] = (vol[y, x, k] - lo) * scale
 
     def build_costs(self, matcher, left, right):
@@ -270,38 +273,38 @@ class PatchHierarchy:
         Level 1 sums the pixels' matching costs M(x, y, c) of L(x + c) against R(x - c)
         (image coordinates clamped at the borders); each higher level sums its children.
         """
-        first = self.levels[0]
-        self._cost_from_pixels(matcher, left, right, first.cost, first.offsets)
+        self._cost_from_pixels(matcher, left, right, self.levels[0])
         for child, level in zip(self.levels, self.levels[1:]):
-            self._cost_from_children(child.cost, child.size, level.cost, level.offsets)
+            self._cost_from_children(child, level)
         for level in self.levels:
-            self._normalise(level.cost)
+            self._normalise(level)
         self.cost_version += 1
 
     # ------------------------------------------------------------------ upward, per iteration
     @ti.func
-    def _shifted(self, plane: ti.template(), y, b, o: ti.template(), span: ti.template()):
+    def _shifted(self, plane: ti.template(), y, b, o: ti.template(), span: ti.template(),
+                 blocks):
         """Centres ``b L + o .. b L + o + L - 1`` of row ``y`` of a level's lane plane (``o``
         a compile-time offset): one or two whole blocks, their lanes moved by ``o mod L``.
-        With a ``span`` (a parent's columns, which end before its child's; ``()``: none),
-        blocks outside it read as zeros: no patch there relays anything."""
+        With a ``span`` (a parent's ``columns``, which end before its child's; ``()``:
+        none), blocks outside it read as zeros: no patch there relays anything."""
         L = ti.static(self.lanes)
         q = ti.static(o // L)
         r = ti.static(o % L)
-        value = self._block(plane, y, b + q, span)
+        value = self._block(plane, y, b + q, span, blocks)
         if ti.static(r != 0):
-            value = self._merge_lanes(value, self._block(plane, y, b + q + 1, span), r)
+            value = self._merge_lanes(value, self._block(plane, y, b + q + 1, span, blocks), r)
         return value
 
     @ti.func
-    def _block(self, plane: ti.template(), y, b, span: ti.template()):
+    def _block(self, plane: ti.template(), y, b, span: ti.template(), blocks):
         """Block ``b`` of row ``y``; with a ``span`` (not ``()``), zeros outside its
-        columns."""
+        columns (``blocks``: the image's blocks of a row)."""
         L = ti.static(self.lanes)
         value = ti.Vector.zero(ti.f32, L)
         if ti.static(len(span) == 0):
             value = plane[y, b]
-        elif -ti.static(span[0] // L) <= b < ti.static(span[1] // L):
+        elif -ti.static(span[0]) <= b < blocks + ti.static(span[1]):
             value = plane[y, b]
         return value
 
@@ -316,26 +319,26 @@ class PatchHierarchy:
 
     @ti.func
     def _window(self, src: ti.template(), y, x0, lo: ti.template(), hi: ti.template(),
-                fill):
+                fill, width):
         """Pixels ``x0 + lo .. x0 + L - 1 + hi`` of row ``y`` of a plain ``(H, W)`` plane as a
         vector, ``fill`` for those outside the image (unclamped reads away from the
         borders; a run-time loop near them)."""
         n = ti.static(self.lanes + hi - lo)
         window = ti.Vector.zero(ti.f32, n)
-        if 0 <= x0 + lo and x0 + n + lo <= self.W:
+        if 0 <= x0 + lo and x0 + n + lo <= width:
             for k in ti.static(range(n)):
                 window[k] = src[y, x0 + lo + k]
         else:
             for k in range(n):
                 window[k] = fill
                 x = x0 + lo + k
-                if 0 <= x < self.W:
+                if 0 <= x < width:
                     window[k] = src[y, x]
         return window
 
     @ti.func
     def _up_from_pixels(self, D: ti.template(), phi: ti.template(), phi_plus: ti.template(),
-                        level: ti.template()):
+                        level: ti.template(), fixed: ti.template()):
         """Level 1 from the pixels, a block of patch centres at a time: each row of the
         patches reads its window of the three planes once (out-of-image pixels as the
         neutral 0, -1e30, +1e30, the old starting values: every patch sums and compares in the
@@ -344,17 +347,18 @@ class PatchHierarchy:
         offs = ti.static(level.offsets)
         lo = ti.static(offs[0])                 # the offsets ascend
         hi = ti.static(offs[len(offs) - 1])
-        for y, b in level.d_sum:
+        height, width, _ = self._size(fixed)
+        for y, b in level.domain:
             x0 = b * L
             s = ti.Vector.zero(ti.f32, L)
             most = ti.Vector([-1e30] * L)
             least = ti.Vector([1e30] * L)
             for jy in ti.static(range(len(offs))):
                 py = y + offs[jy]
-                if 0 <= py < self.H:
-                    wd = self._window(D, py, x0, lo, hi, 0.0)
-                    wp = self._window(phi, py, x0, lo, hi, -1e30)
-                    wq = self._window(phi_plus, py, x0, lo, hi, 1e30)
+                if 0 <= py < height:
+                    wd = self._window(D, py, x0, lo, hi, 0.0, width)
+                    wp = self._window(phi, py, x0, lo, hi, -1e30, width)
+                    wq = self._window(phi_plus, py, x0, lo, hi, 1e30, width)
                     for jx in ti.static(range(len(offs))):
                         k = ti.static(offs[jx] - lo)
                         s += lanes.take(wd, k, L)
@@ -365,18 +369,21 @@ class PatchHierarchy:
             level.phi_plus_min[y, b] = least
 
     @ti.func
-    def _up_from_children(self, child: ti.template(), level: ti.template()):
+    def _up_from_children(self, child: ti.template(), level: ti.template(),
+                          fixed: ti.template()):
         L = ti.static(self.lanes)
         offs = ti.static(level.offsets)
-        for y, b in level.d_sum:
+        _, _, blocks = self._size(fixed)
+        for y, b in level.domain:
             s = ti.Vector.zero(ti.f32, L)
             most = ti.Vector([-1e30] * L)
             least = ti.Vector([1e30] * L)
             for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
                 cy = y + offs[jy]
-                s += self._shifted(child.d_sum, cy, b, offs[jx], ())
-                most = ti.max(most, self._shifted(child.phi_max, cy, b, offs[jx], ()))
-                least = ti.min(least, self._shifted(child.phi_plus_min, cy, b, offs[jx], ()))
+                s += self._shifted(child.d_sum, cy, b, offs[jx], (), blocks)
+                most = ti.max(most, self._shifted(child.phi_max, cy, b, offs[jx], (), blocks))
+                least = ti.min(least, self._shifted(child.phi_plus_min, cy, b, offs[jx], (),
+                                                       blocks))
             level.d_sum[y, b] = s
             level.phi_max[y, b] = most
             level.phi_plus_min[y, b] = least
@@ -385,55 +392,67 @@ class PatchHierarchy:
     def upward(self, D: ti.template(), phi: ti.template(), phi_plus: ti.template()):
         """Relay the patch sums of D and the patch extremes of phi and phi(x + delta_theta)
         from the pixels up through every level (inputs: ``(H, W)`` f32 fields).  One launch:
-        the levels' loops run in order."""
-        self._up_from_pixels(D, phi, phi_plus, self.levels[0])
+        the levels' loops run in order.  Per image size (see the module): the three planes
+        are first copied into planes of the size's own shape, and the levels' loops run over
+        their ``domain``."""
+        planes = ti.static(self._upward_planes)
+        for y, x in planes[0]:
+            planes[0][y, x] = D[y, x]
+            planes[1][y, x] = phi[y, x]
+            planes[2][y, x] = phi_plus[y, x]
+        self._up_from_pixels(planes[0], planes[1], planes[2], self.levels[0], True)
         for i in ti.static(range(1, len(self.levels))):
-            self._up_from_children(self.levels[i - 1], self.levels[i])
+            self._up_from_children(self.levels[i - 1], self.levels[i], True)
 
     # ------------------------------------------------------------------ downward (Eq. 7)
     @ti.func
-    def _down(self, level: ti.template(), parent: ti.template()):
+    def _down(self, level: ti.template(), parent: ti.template(), fixed: ti.template()):
         """A level's relays += its parents', a block of patch centres at a time; its own
         messages count only at in-image centres (the rest of the plane holds last
         iteration's relays)."""
-        H, W = self.H, self.W
+        H, W, blocks = self._size(fixed)
         L = ti.static(self.lanes)
         relay_a, relay_b = ti.static(level.relay_a, level.relay_b)
         parent_offs, parent_margin = ti.static(parent.offsets, parent.margin)
         for y, b in relay_a:
-            a = ti.Vector.zero(ti.f32, L)
-            c = ti.Vector.zero(ti.f32, L)
-            if 0 <= y < H:
-                own_a = relay_a[y, b]
-                own_b = relay_b[y, b]
-                for l in ti.static(range(L)):
-                    if 0 <= b * L + l < W:
-                        a[l] = own_a[l]
-                        c[l] = own_b[l]
-            for jy in ti.static(range(len(parent_offs))):
-                py = y - parent_offs[jy]
-                if -parent_margin <= py < H + parent_margin:
-                    for jx in ti.static(range(len(parent_offs))):
-                        a += self._shifted(parent.relay_a, py, b, -parent_offs[jx], parent.span)
-                        c += self._shifted(parent.relay_b, py, b, -parent_offs[jx], parent.span)
-            relay_a[y, b] = a
-            relay_b[y, b] = c
+            if y < H + ti.static(level.margin) and b < blocks + ti.static(level.columns[1]):
+                a = ti.Vector.zero(ti.f32, L)
+                c = ti.Vector.zero(ti.f32, L)
+                if 0 <= y < H:
+                    own_a = relay_a[y, b]
+                    own_b = relay_b[y, b]
+                    for l in ti.static(range(L)):
+                        if 0 <= b * L + l < W:
+                            a[l] = own_a[l]
+                            c[l] = own_b[l]
+                for jy in ti.static(range(len(parent_offs))):
+                    py = y - parent_offs[jy]
+                    if -parent_margin <= py < H + parent_margin:
+                        for jx in ti.static(range(len(parent_offs))):
+                            a += self._shifted(parent.relay_a, py, b, -parent_offs[jx],
+                                               parent.columns, blocks)
+                            c += self._shifted(parent.relay_b, py, b, -parent_offs[jx],
+                                               parent.columns, blocks)
+                relay_a[y, b] = a
+                relay_b[y, b] = c
 
     @ti.func
-    def _to_pixels(self, level: ti.template()):
+    def _to_pixels(self, level: ti.template(), fixed: ti.template()):
         L = ti.static(self.lanes)
         offs = ti.static(level.offsets)
-        for y, b in ti.ndrange(self.H, self.image_blocks):
-            a = ti.Vector.zero(ti.f32, L)
-            c = ti.Vector.zero(ti.f32, L)
-            for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
-                a += self._shifted(level.relay_a, y - offs[jy], b, -offs[jx], ())
-                c += self._shifted(level.relay_b, y - offs[jy], b, -offs[jx], ())
-            for l in ti.static(range(L)):
-                x = b * L + l
-                if x < self.W:
-                    self.precision[y, x] = a[l]
-                    self.consensus_mean[y, x] = c[l] / a[l] if a[l] > 0 else 0.0
+        height, width, blocks = self._size(fixed)
+        for y, b in ti.ndrange(*ti.static(self.bucket_blocks)):
+            if y < height and b < blocks:
+                a = ti.Vector.zero(ti.f32, L)
+                c = ti.Vector.zero(ti.f32, L)
+                for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
+                    a += self._shifted(level.relay_a, y - offs[jy], b, -offs[jx], (), blocks)
+                    c += self._shifted(level.relay_b, y - offs[jy], b, -offs[jx], (), blocks)
+                for l in ti.static(range(L)):
+                    x = b * L + l
+                    if x < width:
+                        self.precision[y, x] = a[l]
+                        self.consensus_mean[y, x] = c[l] / a[l] if a[l] > 0 else 0.0
 
     @ti.kernel
     def downward(self):
@@ -442,8 +461,8 @@ class PatchHierarchy:
         the levels' loops run in order, from the top."""
         # the top level has no parent: its relay is just its own messages
         for i in ti.static(range(len(self.levels) - 2, -1, -1)):
-            self._down(self.levels[i], self.levels[i + 1])
-        self._to_pixels(self.levels[0])
+            self._down(self.levels[i], self.levels[i + 1], False)
+        self._to_pixels(self.levels[0], False)
 
     # ------------------------------------------------------------------ inspection
     @ti.kernel

@@ -17,10 +17,12 @@ in the authors' release).  The median's output goes through :class:`Settle`, whi
 the pixels whose sign flipped and writes D (Eq. 3, with the sharp Heaviside), so neither needs a
 pass of its own.
 
-Frame: cyclopean ``(H, W)`` fields indexed ``[y, x]``; phi > 0 is the foreground.  phi's
+Frame: cyclopean ``(H, W)`` images indexed ``[y, x]``; phi > 0 is the foreground.  phi's
 derivatives (``phi_x``, ``kappa``, ``normal_x``, ``normal_y``) are lane planes
 (:mod:`lss_kernels.kernels.lanes`): the column passes and the Eq. 2 step run a block of
-horizontally adjacent pixels per loop index.
+horizontally adjacent pixels per loop index.  Every plane has the shape of the image's size
+bucket and the kernels read ``H`` and ``W`` at run time from the pool's
+:class:`~lss_kernels.kernels.backend.Extent`: they compile once per bucket.
 """
 import math
 
@@ -77,36 +79,37 @@ class LevelSet:
 
     def __init__(self, pool, height, width, params):
         self.H, self.W = int(height), int(width)
-        H, W = self.H, self.W
-        f = lambda: pool.field(ti.f32, (H, W))
+        self.extent = pool.extent(self.H, self.W)
+        H, W = self.extent.bucket
+        f = lambda: pool.field(ti.f32, (H, W), bucket=True)
         self.phi = f()
         self.phi_next = f()
         self.b_map = f()
         self.D = f()                                   # Eq. 3, cyclopean units
-        self.d_limit = pool.field(ti.f32, ())          # D is clamped to [0, c_max]
+        self.d_limit = pool.field(ti.f32, (), bucket=True)    # D is clamped to [0, c_max]
         self.lanes = lanes.lanes_for_arch()
-        self.blocks = lanes.block_count(W, self.lanes)
+        self.blocks = lanes.block_count(self.W, self.lanes)
         # lane planes: the sign of dphi/dx orients the occlusion ray cast; kappa and N enter
         # the Eq. 2 step
-        plane = lambda: lanes.lane_plane(pool, H, W, self.lanes)
+        plane = lambda: lanes.lane_plane(pool, H, W, self.lanes, bucket=True)
         self.phi_x, self.kappa, self.normal_x, self.normal_y = (plane() for _ in range(4))
-        self.filters = GaussianFilters(pool, H, W, params.curvature_sigma)
-        self.median = MedianFilter(pool, H, W, params.median_size)
-        self.flipped = pool.field(ti.i32, ())
-        self.changed = pool.field(ti.i32, ())
-        self.reference_sign = pool.field(ti.i8, (H, W))
-        self.area = pool.field(ti.i32, ())
+        self.filters = GaussianFilters(pool, self.H, self.W, params.curvature_sigma)
+        self.median = MedianFilter(pool, self.H, self.W, params.median_size)
+        self.flipped = pool.field(ti.i32, (), bucket=True)
+        self.changed = pool.field(ti.i32, (), bucket=True)
+        self.reference_sign = pool.field(ti.i8, (H, W), bucket=True)
+        self.area = pool.field(ti.i32, (), bucket=True)
         self.curvature_clip = float(params.curvature_clip)
         self.boundary_clip = float(params.boundary_clip)
         self.scale = float(params.phi_scale)
         # squared distances of the re-initialisation (also B_mono's scratch, see costs)
-        self.distance_map = pool.field(ti.f32, (H, W, 1))
+        self.distance_map = pool.field(ti.f32, (H, W, 1), bucket=True)
         self.distance = None
         self._settle = {}
 
     def setup(self):
         """Allocate the re-initialisation scratch; call once the pool is finalised."""
-        self.distance = DistanceTransform((self.H, self.W, 1))
+        self.distance = DistanceTransform(self.extent.bucket + (1,))
 
     @property
     def scratch_bytes(self):
@@ -121,7 +124,7 @@ class LevelSet:
     def image(self, plane):
         """One of the lane planes ``phi_x``, ``kappa``, ``normal_x``, ``normal_y`` as an
         ``(H, W)`` float32 array."""
-        return lanes.to_image(plane, self.W)
+        return lanes.to_image(plane, self.H, self.W)
 
     @ti.func
     def _columns_curvature(self):
@@ -133,15 +136,21 @@ class LevelSet:
         pixels."""
         clip = self.curvature_clip
         for y, b in self.kappa:
-            py, pyy = self.filters.columns(0, y, b, (1, 2))
-            px, pxy = self.filters.columns(1, y, b, (0, 1))
-            pxx = self.filters.columns(2, y, b, (0,))[0]
-            norm = ti.sqrt(px * px + py * py) + 1e-10
-            k = (pxx * py * py - 2.0 * px * py * pxy + pyy * px * px) / (norm * norm * norm)
-            self.phi_x[y, b] = px
-            self.kappa[y, b] = ti.min(ti.max(k, -clip), clip)
-            self.normal_x[y, b] = px / norm
-            self.normal_y[y, b] = py / norm
+            if y < self.extent.height() and b < self._blocks():
+                py, pyy = self.filters.columns(0, y, b, (1, 2))
+                px, pxy = self.filters.columns(1, y, b, (0, 1))
+                pxx = self.filters.columns(2, y, b, (0,))[0]
+                norm = ti.sqrt(px * px + py * py) + 1e-10
+                k = (pxx * py * py - 2.0 * px * py * pxy + pyy * px * px) / (norm * norm * norm)
+                self.phi_x[y, b] = px
+                self.kappa[y, b] = ti.min(ti.max(k, -clip), clip)
+                self.normal_x[y, b] = px / norm
+                self.normal_y[y, b] = py / norm
+
+    @ti.func
+    def _blocks(self):
+        """Blocks of lanes that cover a row of the image (run time)."""
+        return (self.extent.width() + self.lanes - 1) // self.lanes
 
     @ti.kernel
     def derivatives(self):
@@ -154,12 +163,14 @@ class LevelSet:
     @ti.func
     def _b_map(self, costs: ti.template(), shapes: ti.template()):
         L = ti.static(self.lanes)
+        width = self.extent.width()
         for y, b in self.kappa:
-            theta_1 = shapes.value(0, lanes.columns(b, L), ti.cast(y, ti.f32))
-            for lane in range(L):
-                x = b * L + lane
-                if x < self.W:
-                    self.b_map[y, x] = costs.b_at(y, x, theta_1[lane])
+            if y < self.extent.height() and b < self._blocks():
+                theta_1 = shapes.value(0, lanes.columns(b, L), ti.cast(y, ti.f32))
+                for lane in range(L):
+                    x = b * L + lane
+                    if x < width:
+                        self.b_map[y, x] = costs.b_at(y, x, theta_1[lane])
 
     @ti.kernel
     def boundary_weight(self, costs: ti.template(), shapes: ti.template()):
@@ -170,11 +181,12 @@ class LevelSet:
 
     # ---------------------------------------------------------------- Eq. 2
     @ti.func
-    def _cost_at(self, cost: ti.template(), y, x, c, C: ti.template()):
-        """M(x, y, c) at real x and c (linear in both; clamped to the volume)."""
-        xf = ti.min(ti.max(x, 0.0), self.W - 1.0)
-        x0 = ti.min(ti.cast(ti.floor(xf), ti.i32), ti.max(self.W - 2, 0))
-        x1 = ti.min(x0 + 1, self.W - 1)
+    def _cost_at(self, cost: ti.template(), y, x, c, C: ti.template(), width):
+        """M(x, y, c) at real x and c (linear in both; clamped to the volume ``width``
+        pixels wide)."""
+        xf = ti.min(ti.max(x, 0.0), width - 1.0)
+        x0 = ti.min(ti.cast(ti.floor(xf), ti.i32), ti.max(width - 2, 0))
+        x1 = ti.min(x0 + 1, width - 1)
         tx = xf - x0
         a = self._cost_at_pixel(cost, y, x0, c, C)
         b = self._cost_at_pixel(cost, y, x1, c, C)
@@ -197,52 +209,58 @@ class LevelSet:
         in :meth:`boundary_weight`), then each pixel's data term."""
         clip = self.boundary_clip
         L = ti.static(self.lanes)
+        width = self.extent.width()
         for y, b in self.kappa:
-            b_x = self.filters.columns(1, y, b, (0,))[0]
-            b_y = self.filters.columns(0, y, b, (1,))[0]
-            b_map = lanes.block(self.b_map, y, b, L)
-            bt = b_map * self.kappa[y, b] + self.normal_x[y, b] * b_x + \
-                self.normal_y[y, b] * b_y
-            bt = ti.min(ti.max(bt, -clip), clip)
-            xs = lanes.columns(b, L)
-            yf = ti.cast(y, ti.f32)
-            theta_1 = shapes.value(0, xs, yf)
-            theta_2 = shapes.value(1, xs, yf)
-            for lane in range(L):     # not unrolled: compiles 3x faster, runs as fast
-                x = b * L + lane
-                if x < self.W:
-                    xf = xs[lane]
-                    p = self.phi[y, x]
-                    m1 = self._cost_at_pixel(cost, y, x, theta_1[lane], C)
-                    m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x], theta_2[lane], C)
-                    dirac = (1.0 / math.pi) / (1.0 + p * p)
-                    self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt[lane])
+            if y < self.extent.height() and b < self._blocks():
+                b_x = self.filters.columns(1, y, b, (0,))[0]
+                b_y = self.filters.columns(0, y, b, (1,))[0]
+                b_map = lanes.block(self.b_map, y, b, L, width)
+                bt = b_map * self.kappa[y, b] + self.normal_x[y, b] * b_x + \
+                    self.normal_y[y, b] * b_y
+                bt = ti.min(ti.max(bt, -clip), clip)
+                xs = lanes.columns(b, L)
+                yf = ti.cast(y, ti.f32)
+                theta_1 = shapes.value(0, xs, yf)
+                theta_2 = shapes.value(1, xs, yf)
+                for lane in range(L):     # not unrolled: compiles 3x faster, runs as fast
+                    x = b * L + lane
+                    if x < width:
+                        xf = xs[lane]
+                        p = self.phi[y, x]
+                        m1 = self._cost_at_pixel(cost, y, x, theta_1[lane], C)
+                        m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x], theta_2[lane], C,
+                                           width)
+                        dirac = (1.0 / math.pi) / (1.0 + p * p)
+                        self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt[lane])
 
     # ---------------------------------------------------------------- re-initialisation, stopping
     @ti.kernel
     def _features(self, src: ti.template(), foreground: ti.i32):
-        for y, x in src:
-            inside = src[y, x] > 0
-            self.distance_map[y, x, 0] = 0.0 if inside == (foreground == 1) else INF
+        for y, x in self.phi:
+            if y < self.extent.height() and x < self.extent.width():
+                inside = src[y, x] > 0
+                self.distance_map[y, x, 0] = 0.0 if inside == (foreground == 1) else INF
 
     @ti.kernel
     def _signed(self, phi: ti.template(), foreground: ti.i32, scale: ti.f32):
         # phi = scale * (distance to the other region - 1/2), the boundary lying between
         # pixel centres; the distance is capped at the image diagonal
-        cap = ti.sqrt(ti.cast(self.H * self.H + self.W * self.W, ti.f32))
+        height, width = self.extent.height(), self.extent.width()
+        cap = ti.sqrt(ti.cast(height * height + width * width, ti.f32))
         for y, x in phi:
-            inside = phi[y, x] > 0
-            if inside == (foreground == 1):
-                # d >= 1 (measured to the nearest pixel of the other region): signs are kept
-                d = ti.min(ti.sqrt(self.distance_map[y, x, 0]), cap)
-                phi[y, x] = (scale if foreground == 1 else -scale) * (d - 0.5)
+            if y < height and x < width:
+                inside = phi[y, x] > 0
+                if inside == (foreground == 1):
+                    # d >= 1 (measured to the nearest pixel of the other region): signs are kept
+                    d = ti.min(ti.sqrt(self.distance_map[y, x, 0]), cap)
+                    phi[y, x] = (scale if foreground == 1 else -scale) * (d - 0.5)
 
     def reinitialise(self, phi):
         """phi <- phi_scale x signed distance of the region phi > 0, in place (the signs, and
         so the region, are kept)."""
         for region in (1, 0):
             self._features(phi, 1 - region)  # distance to the pixels of the other region
-            self.distance.run(self.distance_map)
+            self.distance.run(self.distance_map, (self.H, self.W))
             self._signed(phi, region, self.scale)
 
     @ti.kernel
@@ -251,10 +269,11 @@ class LevelSet:
         change over a window: an oscillating boundary does not count); renews the reference."""
         self.changed[None] = 0
         for y, x in self.phi:
-            now = ti.cast(self.phi[y, x] > 0, ti.i8)
-            if now != self.reference_sign[y, x]:
-                self.changed[None] += 1
-            self.reference_sign[y, x] = now
+            if y < self.extent.height() and x < self.extent.width():
+                now = ti.cast(self.phi[y, x] > 0, ti.i8)
+                if now != self.reference_sign[y, x]:
+                    self.changed[None] += 1
+                self.reference_sign[y, x] = now
 
     def settle(self, shapes):
         """phi <- the median of phi_next, counting the sign flips (``flipped``) and the
@@ -275,12 +294,14 @@ class LevelSet:
     @ti.kernel
     def _take_next(self):
         for y, x in self.phi:
-            self.phi[y, x] = self.phi_next[y, x]
+            if y < self.extent.height() and x < self.extent.width():
+                self.phi[y, x] = self.phi_next[y, x]
 
     @ti.kernel
     def _from_mask(self, mask: ti.types.ndarray()):
-        for y, x in self.phi_next:
-            self.phi_next[y, x] = 1.0 if mask[y, x] != 0 else -1.0
+        for y, x in self.phi:
+            if y < self.extent.height() and x < self.extent.width():
+                self.phi_next[y, x] = 1.0 if mask[y, x] != 0 else -1.0
 
     def start(self, mask, c_max):
         """phi = phi_scale x signed distance of a boolean ``(H, W)`` mask; D will be clamped

@@ -20,7 +20,7 @@ M matters.
 """
 import taichi as ti
 
-from ..kernels.backend import FieldPool, bucket_shape
+from ..kernels.backend import FieldPool
 
 __all__ = ["COSTS", "MatchingCost"]
 
@@ -41,10 +41,9 @@ class MatchingCost:
 
     The census lives in the pool's bucket tree (see
     :class:`lss_kernels.kernels.backend.FieldPool`): the grey planes and the census words of
-    both views, view 0 the left, 1 the right, in planes of the size bucket's shape.  The
-    transform, :meth:`_bucket_census`, touches only those fields and reads the image's size at
-    run time, so it compiles once per size bucket; :meth:`_load` (the greys, per size) is
-    small.
+    both views, view 0 the left, 1 the right, in planes of the size bucket's shape.  Its
+    kernels read the image's size at run time from the pool's
+    :class:`~lss_kernels.kernels.backend.Extent`, so they compile once per size bucket.
 
     Parameters
     ----------
@@ -59,36 +58,32 @@ class MatchingCost:
         self.H, self.W, self.kind = int(height), int(width), kind
         self.census = kind == "ad_census"
         if self.census:
-            self.bucket = bucket_shape(self.H, self.W)
-            shape = (2,) + self.bucket
-            # H and W of the images in the bucket, written by every _load
-            self._size = pool.field(ti.i32, (2,), bucket=True)
+            self.extent = pool.extent(self.H, self.W)
+            shape = (2,) + self.extent.bucket
             self.grey = pool.field(ti.f32, shape, bucket=True)
             self.words = pool.vector(2, ti.u32, shape, bucket=True)
 
     @ti.kernel
     def _load(self, left: ti.template(), right: ti.template()):
-        """Per size: the images' size and their greys into the bucket.  Each pixel's grey is
+        """The images' greys into the bucket.  Each pixel's grey is
         computed once, then compared (:meth:`_bucket_census`): the same colour is the same grey,
         never below the centre, as in the specification
         (:func:`lss_kernels.reference.kernels.census`).  A grey computed at every use, as a
         neighbour and as the centre, may be summed in other orders by LLVM's fast-math
         reassociation, and a neighbour of the centre's own colour could then count as below
         it."""
-        self._size[0] = self.H
-        self._size[1] = self.W
         for view in ti.static(range(2)):
             img = ti.static((left, right)[view])
-            for y, x in img:
+            for y, x in ti.ndrange(self.extent.height(), self.extent.width()):
                 p = img[y, x]
                 self.grey[view, y, x] = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
 
     @ti.kernel
     def _bucket_census(self):
-        """Per bucket: the census transforms of both views' greys into ``words``, for the
-        run-time ``H x W`` region only."""
-        height = self._size[0]
-        width = self._size[1]
+        """The census transforms of both views' greys into ``words``, for the run-time
+        ``H x W`` region only."""
+        height = self.extent.height()
+        width = self.extent.width()
         for view, y, x in ti.ndrange(2, height, width):
             centre = self.grey[view, y, x]
             words = ti.Vector([ti.u32(0), ti.u32(0)])

@@ -56,11 +56,15 @@ class Messages:
         self.hierarchy = hierarchy
         self.levels = hierarchy.levels
         self.H, self.W, self.C = hierarchy.H, hierarchy.W, hierarchy.C
-        self.lanes, self.image_blocks = hierarchy.lanes, hierarchy.image_blocks
+        self.extent = hierarchy.extent
+        self.lanes = hierarchy.lanes
         self.subpixel = bool(subpixel)
         self.ambiguity = float(ambiguity)
-        # per level, q of every patch centre in lane blocks (as the level's ``key``)
-        self.distinct = ([pool.vector(self.lanes, ti.f32, (self.H, self.image_blocks))
+        # per level, q of every patch centre in lane blocks (as the level's ``key``), in the
+        # bucket's shape
+        height, width = self.extent.bucket
+        self.distinct = ([pool.vector(self.lanes, ti.f32,
+                                      (height, -(-width // self.lanes)), bucket=True)
                           for _ in self.levels] if self.ambiguity > 0 else [])
         self._cached = None       # (beta, the hierarchy's cost_version) of the cache
         self._distinct_version = None
@@ -124,49 +128,51 @@ class Messages:
         cf = ti.cast(self.C, ti.f32)
         size, cost = ti.static(level.size, level.cost)
         d_sum, phi_max, phi_plus_min = ti.static(level.d_sum, level.phi_max, level.phi_plus_min)
-        for y, blk in ti.ndrange(self.H, self.image_blocks):
-            x = ti.Vector([blk * L + lane for lane in ti.static(range(L))])
-            w = ti.cast(x < self.W, ti.i32)          # in the image and valid
-            if use_validity:
-                w &= ti.cast((phi_max[y, blk] > 0) != (phi_plus_min[y, blk] < 0),
-                             ti.i32)                  # Eq. 4
-            # the prior mean m
-            n = self.hierarchy._in_image_count(size, y, x)
-            m = ti.min(ti.max(d_sum[y, blk] / ti.max(n, 1), 0.0), cf)
-            lo = ti.cast(ti.floor(m), ti.i32)            # candidates c <= lo ...
-            hi = ti.max(ti.cast(ti.ceil(m), ti.i32), 1)  # ... and c >= hi
-            key = 2 * lo + 1 + ti.cast(hi == lo, ti.i32)
-            moved = w & ti.cast(level.key[y, blk] != key, ti.i32)
-            if moved.sum() > 0:
-                for lane in range(L):
-                    if moved[lane]:
-                        self._search(level, y, blk, lane, x[lane], lo[lane], hi[lane],
-                                     key[lane], beta)
-            # Eq. 5 from the two candidates: min over c of C_p(c) + beta |c - m|, less the
-            # mean over c of C_p
-            below = level.below[y, blk] + beta * m
-            above = level.above[y, blk] - beta * m
-            take_above = above < below
-            best = ti.min(below, above)
-            d = ti.select(take_above, level.d_above[y, blk], level.d_below[y, blk])
-            # mean over c of beta |c - m|, in closed form
-            f = ti.cast(lo, ti.f32)
-            l1 = f * m - 0.5 * f * (f + 1.0) + 0.5 * (cf * (cf + 1.0) - f * (f + 1.0)) \
-                - (cf - f) * m
-            spread = beta * l1 / cf - best
-            sigma = ti.select(w == 1, cf / (spread + 1e-8), 1.0)   # 1: no message
-            a = ti.select(w == 1, 1.0 / (sigma * sigma), 0.0)
-            if ti.static(self.ambiguity > 0):
-                a *= self.distinct[level.index][y, blk]
-            level.relay_a[y, blk] = a
-            level.relay_b[y, blk] = a * d
-            if ti.static(keep):
-                for lane in ti.static(range(L)):
-                    if x[lane] < self.W:
-                        level.valid[y, x[lane]] = w[lane]
-                        if w[lane] == 1:
-                            level.d_p[y, x[lane]] = d[lane]
-                            level.sigma_p[y, x[lane]] = sigma[lane]
+        width = self.extent.width()
+        for y, blk in ti.ndrange(*ti.static(self.hierarchy.bucket_blocks)):
+            if y < self.extent.height() and blk < self.hierarchy.image_blocks_now():
+                x = ti.Vector([blk * L + lane for lane in ti.static(range(L))])
+                w = ti.cast(x < width, ti.i32)           # in the image and valid
+                if use_validity:
+                    w &= ti.cast((phi_max[y, blk] > 0) != (phi_plus_min[y, blk] < 0),
+                                 ti.i32)                  # Eq. 4
+                # the prior mean m
+                n = self.hierarchy._in_image_count(size, y, x, self.extent.height(), width)
+                m = ti.min(ti.max(d_sum[y, blk] / ti.max(n, 1), 0.0), cf)
+                lo = ti.cast(ti.floor(m), ti.i32)            # candidates c <= lo ...
+                hi = ti.max(ti.cast(ti.ceil(m), ti.i32), 1)  # ... and c >= hi
+                key = 2 * lo + 1 + ti.cast(hi == lo, ti.i32)
+                moved = w & ti.cast(level.key[y, blk] != key, ti.i32)
+                if moved.sum() > 0:
+                    for lane in range(L):
+                        if moved[lane]:
+                            self._search(level, y, blk, lane, x[lane], lo[lane], hi[lane],
+                                         key[lane], beta)
+                # Eq. 5 from the two candidates: min over c of C_p(c) + beta |c - m|, less the
+                # mean over c of C_p
+                below = level.below[y, blk] + beta * m
+                above = level.above[y, blk] - beta * m
+                take_above = above < below
+                best = ti.min(below, above)
+                d = ti.select(take_above, level.d_above[y, blk], level.d_below[y, blk])
+                # mean over c of beta |c - m|, in closed form
+                f = ti.cast(lo, ti.f32)
+                l1 = f * m - 0.5 * f * (f + 1.0) + 0.5 * (cf * (cf + 1.0) - f * (f + 1.0)) \
+                    - (cf - f) * m
+                spread = beta * l1 / cf - best
+                sigma = ti.select(w == 1, cf / (spread + 1e-8), 1.0)   # 1: no message
+                a = ti.select(w == 1, 1.0 / (sigma * sigma), 0.0)
+                if ti.static(self.ambiguity > 0):
+                    a *= self.distinct[level.index][y, blk]
+                level.relay_a[y, blk] = a
+                level.relay_b[y, blk] = a * d
+                if ti.static(keep):
+                    for lane in ti.static(range(L)):
+                        if x[lane] < width:
+                            level.valid[y, x[lane]] = w[lane]
+                            if w[lane] == 1:
+                                level.d_p[y, x[lane]] = d[lane]
+                                level.sigma_p[y, x[lane]] = sigma[lane]
 
     @ti.func
     def _search(self, level: ti.template(), y, blk, lane, x, lo, hi, key, beta):
@@ -220,27 +226,29 @@ class Messages:
     def _distinctness(self, i: ti.template(), cost: ti.template()):
         """q of every patch centre of level ``i`` from its matching-cost curve (the cost
         volumes do not change during a solve: computed once per set-up)."""
-        for y, blk in ti.ndrange(self.H, self.image_blocks):
-            for lane in range(self.lanes):
-                x = blk * self.lanes + lane
-                q = 0.0
-                if x < self.W:
-                    best, kb, total = 1e30, 0, 0.0
-                    for k in range(self.C):
-                        c = cost[y, x, k]
-                        total += c
-                        if c < best:
-                            best, kb = c, k
-                    second = 1e30
-                    for k in range(self.C):
-                        if ti.abs(k - kb) >= 2:
-                            second = ti.min(second, cost[y, x, k])
-                    mean = total / self.C
-                    r = 1.0
-                    if mean > best:
-                        r = ti.min((mean - ti.min(second, mean)) / (mean - best), 1.0)
-                    q = ti.min(ti.max((1.0 - r) / self.ambiguity, 0.0), 1.0)
-                self.distinct[i][y, blk][lane] = q
+        width = self.extent.width()
+        for y, blk in ti.ndrange(*ti.static(self.hierarchy.bucket_blocks)):
+            if y < self.extent.height() and blk < self.hierarchy.image_blocks_now():
+                for lane in range(self.lanes):
+                    x = blk * self.lanes + lane
+                    q = 0.0
+                    if x < width:
+                        best, kb, total = 1e30, 0, 0.0
+                        for k in range(self.C):
+                            c = cost[y, x, k]
+                            total += c
+                            if c < best:
+                                best, kb = c, k
+                        second = 1e30
+                        for k in range(self.C):
+                            if ti.abs(k - kb) >= 2:
+                                second = ti.min(second, cost[y, x, k])
+                        mean = total / self.C
+                        r = 1.0
+                        if mean > best:
+                            r = ti.min((mean - ti.min(second, mean)) / (mean - best), 1.0)
+                        q = ti.min(ti.max((1.0 - r) / self.ambiguity, 0.0), 1.0)
+                    self.distinct[i][y, blk][lane] = q
 
     @ti.kernel
     def _all_levels(self, beta: ti.f32, use_validity: ti.i32, keep: ti.template()):

@@ -33,26 +33,33 @@ __all__ = ["OcclusionGeometry"]
 
 @ti.data_oriented
 class OcclusionGeometry:
-    """Owns delta_theta, phi(x + delta_theta) and the left-view outputs."""
+    """Owns delta_theta, phi(x + delta_theta) and the left-view outputs: planes of the
+    image's size bucket, whose ``H x W`` region the kernels fill (``H`` and ``W`` read at run
+    time from the pool's :class:`~lss_kernels.kernels.backend.Extent`, save in the ray
+    cast)."""
 
     def __init__(self, pool, height, width, c_max):
         self.H, self.W, self.C = int(height), int(width), int(c_max)
+        self.extent = pool.extent(self.H, self.W)
         self.lanes = lanes.lanes_for_arch()
-        self.blocks = lanes.block_count(self.W, self.lanes)
-        self.delta_theta = pool.field(ti.f32, (self.H, self.W))
-        self.phi_plus = pool.field(ti.f32, (self.H, self.W))
-        self.disparity_left = pool.field(ti.f32, (self.H, self.W))
-        self.occlusion_left = pool.field(ti.i32, (self.H, self.W))
-        self.foreground_left = pool.field(ti.i32, (self.H, self.W))
+        plane = lambda dtype: pool.field(dtype, self.extent.bucket, bucket=True)
+        self.delta_theta = plane(ti.f32)
+        self.phi_plus = plane(ti.f32)
+        self.disparity_left = plane(ti.f32)
+        self.occlusion_left = plane(ti.i32)
+        self.foreground_left = plane(ti.i32)
 
     @ti.func
     def sample_row(self, f: ti.template(), y, x):
         """Linear interpolation of ``f[y, .]`` at real x, clamped to the image."""
-        xf = ti.min(ti.max(x, 0.0), self.W - 1.0)
-        x0 = ti.min(ti.cast(ti.floor(xf), ti.i32), self.W - 2) if self.W > 1 else 0
+        width = self.extent.width()
+        xf = ti.min(ti.max(x, 0.0), width - 1.0)
+        x0 = 0
+        if width > 1:
+            x0 = ti.min(ti.cast(ti.floor(xf), ti.i32), width - 2)
         t = xf - x0
         v = f[y, x0]
-        if self.W > 1:
+        if width > 1:
             v = (1.0 - t) * f[y, x0] + t * f[y, x0 + 1]
         return v
 
@@ -67,22 +74,25 @@ class OcclusionGeometry:
     def _ray_cast(self, shapes: ti.template(), phi_x: ti.template(), ray_cast: ti.i32,
                   t_max: ti.f32):
         """:meth:`compute`; ``t_max`` (the largest jump, 2 c_max) is an argument, not a
-        constant, so that the kernel does not depend on the disparity range."""
-        L = ti.static(self.lanes)
-        for y, b in ti.ndrange(self.H, self.blocks):
+        constant, so that the kernel does not depend on the disparity range.  Once per image
+        size: the size and the shapes' normalisation are compile-time constants
+        (:meth:`~lss_kernels.model.shapes.GlobalShapes.value_of_size`), which keeps the
+        fixed-point steps' float code that of one size."""
+        L, width = ti.static(self.lanes, self.W)
+        for y, b in ti.ndrange(self.H, ti.static(lanes.block_count(width, L))):
             xf = lanes.columns(b, L)
             yf = ti.cast(y, ti.f32)
-            th1 = shapes.value(0, xf, yf)
-            jump = th1 - shapes.value(1, xf, yf)
-            slope = lanes.block(phi_x, y, b, L)
+            th1 = shapes.value_of_size(0, xf, yf)
+            jump = th1 - shapes.value_of_size(1, xf, yf)
+            slope = lanes.block(phi_x, y, b, L, width)
             s = ti.select(slope > 0, 1.0, ti.select(slope < 0, -1.0, 0.0))
             # lanes past the right edge (no pixel) must not keep the block stepping
-            cast = (jump > 0) & (s != 0) & (xf < self.W)
+            cast = (jump > 0) & (s != 0) & (xf < width)
             t = jump
             if ray_cast:
                 for _ in range(FIXED_POINT_STEPS):
-                    t_next = ti.min(ti.max(th1 - shapes.value(1, xf - s * t, yf), 0.0),
-                                    t_max)
+                    t_next = ti.min(ti.max(th1 - shapes.value_of_size(1, xf - s * t, yf),
+                                           0.0), t_max)
                     t_next = ti.select(cast, t_next, t)
                     if all(t_next == t):
                         break  # every fixed point reached: the remaining steps repeat it
@@ -90,16 +100,18 @@ class OcclusionGeometry:
             dt = ti.select(cast, s * t, 0.0)
             for lane in range(L):
                 x = b * L + lane
-                if x < self.W:
+                if x < width:
                     self.delta_theta[y, x] = dt[lane]
 
     @ti.kernel
     def refresh_phi_plus(self, phi: ti.template()):
         """phi_plus = phi(x + delta_theta), the level set where the ray from (x, y) meets the
         foreground's layer (Eq. 4's validity and the visible background read its sign)."""
+        height, width = self.extent.height(), self.extent.width()
         for y, x in self.phi_plus:
-            self.phi_plus[y, x] = self.sample_row(phi, y, ti.cast(x, ti.f32) +
-                                                  self.delta_theta[y, x])
+            if y < height and x < width:
+                self.phi_plus[y, x] = self.sample_row(phi, y, ti.cast(x, ti.f32) +
+                                                      self.delta_theta[y, x])
 
     @ti.func
     def _source(self, shapes: ti.template(), j, x, y, sign):
@@ -112,27 +124,29 @@ class OcclusionGeometry:
     @ti.kernel
     def render_left(self, shapes: ti.template(), phi: ti.template()):
         """Left-view disparity (2 Theta, left-view pixels), foreground and occlusion masks."""
+        width = ti.cast(self.extent.width(), ti.f32)
         for y, x in self.disparity_left:
-            xf = ti.cast(x, ti.f32)
-            yf = ti.cast(y, ti.f32)
-            xc = self._source(shapes, 0, xf, yf, 1.0)
-            fg = 0
-            if -0.5 <= xc <= self.W - 0.5:
-                if self.sample_row(phi, y, xc) > 0:
-                    fg = 1
-            occ = 0
-            d = 0.0
-            if fg == 1:
-                d = 2.0 * shapes.value(0, xc, yf)
-            else:
-                xb = self._source(shapes, 1, xf, yf, 1.0)
-                d = 2.0 * shapes.value(1, xb, yf)
-                # the right camera sees x - d: is that the foreground?
-                xr = xf - d
-                xcr = self._source(shapes, 0, xr, yf, -1.0)
-                if -0.5 <= xcr <= self.W - 0.5:
-                    if self.sample_row(phi, y, xcr) > 0:
-                        occ = 1
-            self.disparity_left[y, x] = ti.max(d, 0.0)
-            self.foreground_left[y, x] = fg
-            self.occlusion_left[y, x] = occ
+            if y < self.extent.height() and x < self.extent.width():
+                xf = ti.cast(x, ti.f32)
+                yf = ti.cast(y, ti.f32)
+                xc = self._source(shapes, 0, xf, yf, 1.0)
+                fg = 0
+                if -0.5 <= xc <= width - 0.5:
+                    if self.sample_row(phi, y, xc) > 0:
+                        fg = 1
+                occ = 0
+                d = 0.0
+                if fg == 1:
+                    d = 2.0 * shapes.value(0, xc, yf)
+                else:
+                    xb = self._source(shapes, 1, xf, yf, 1.0)
+                    d = 2.0 * shapes.value(1, xb, yf)
+                    # the right camera sees x - d: is that the foreground?
+                    xr = xf - d
+                    xcr = self._source(shapes, 0, xr, yf, -1.0)
+                    if -0.5 <= xcr <= width - 0.5:
+                        if self.sample_row(phi, y, xcr) > 0:
+                            occ = 1
+                self.disparity_left[y, x] = ti.max(d, 0.0)
+                self.foreground_left[y, x] = fg
+                self.occlusion_left[y, x] = occ

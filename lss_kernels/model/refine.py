@@ -51,39 +51,52 @@ class LayerRefinement:
         layer-restricted matching window and of the residual's box, per pass.
     ratio : float
         Peak-ratio threshold of a distinct match (in (0, 1]).
+
+    The planes have the shape of the image's size bucket and the kernels read ``H`` and
+    ``W`` at run time from the pool's :class:`~lss_kernels.kernels.backend.Extent`: they
+    compile once per bucket.
     """
 
     def __init__(self, pool, height, width, passes, ratio):
         self.H, self.W = int(height), int(width)
+        self.extent = pool.extent(self.H, self.W)
         self.passes = tuple(tuple(int(v) for v in p) for p in passes)
         self.ratio = float(ratio)
         self.K = 2 * max(p[0] for p in self.passes) + 1
-        shape = (self.H, self.W)
+        shape = self.extent.bucket
+        field = lambda dtype, shape: pool.field(dtype, shape, bucket=True)
+        vector = lambda: pool.vector(4, ti.f32, shape, bucket=True)
         self.matching = MatchingCost(pool, self.H, self.W, "ad_census")
-        self.label = pool.field(ti.i32, shape)          # 0 foreground, 1 background
-        self.visible = pool.field(ti.i32, shape)        # seen by both cameras
-        self.surface = pool.field(ti.f32, shape)
-        self.base = pool.field(ti.i32, shape)
-        self.span = pool.field(ti.i32, (2,))             # the lowest and highest base
-        self.costs = pool.field(ti.f32, (self.H, self.W, self.K))
-        self.residual = pool.field(ti.f32, shape)
-        self.weight = pool.field(ti.f32, shape)
+        self.label = field(ti.i32, shape)          # 0 foreground, 1 background
+        self.visible = field(ti.i32, shape)        # seen by both cameras
+        self.surface = field(ti.f32, shape)
+        self.base = field(ti.i32, shape)
+        self.span = field(ti.i32, (2,))             # the lowest and highest base
+        self.costs = field(ti.f32, shape + (self.K,))
+        self.residual = field(ti.f32, shape)
+        self.weight = field(ti.f32, shape)
         # box sums of a 4-channel source, a value and its weight per layer (value fg,
         # value bg, weight fg, weight bg): its row prefix sums, the column prefix sums of
         # their row boxes, the box, and the residual's average (the sums of both boxes)
-        self.source = pool.vector(4, ti.f32, shape)
-        self.prefix = pool.vector(4, ti.f32, shape)
-        self.columns = pool.vector(4, ti.f32, shape)
-        self.box = pool.vector(4, ti.f32, shape)
-        self.average = pool.vector(4, ti.f32, shape)
+        self.source = vector()
+        self.prefix = vector()
+        self.columns = vector()
+        self.box = vector()
+        self.average = vector()
+
+    @ti.func
+    def _pixels(self):
+        """The ``ti.ndrange`` bounds of the image's pixels (``y, x``)."""
+        return (0, self.extent.height()), (0, self.extent.width())
 
     # ------------------------------------------------------------------ box sums
     @ti.kernel
     def _row_prefix(self):
         """``prefix``: the prefix sums of ``source`` along each row."""
-        for y in range(self.H):
+        width = self.extent.width()
+        for y in range(self.extent.height()):
             s = ti.Vector([0.0, 0.0, 0.0, 0.0])
-            for x in range(self.W):
+            for x in range(width):
                 s += self.source[y, x]
                 self.prefix[y, x] = s
 
@@ -91,10 +104,11 @@ class LayerRefinement:
     def _column_prefix(self, r: ti.i32):
         """``columns``: the prefix sums down each column of the row boxes (half-width r,
         clamped to the image) that ``prefix`` gives."""
-        for x in range(self.W):
+        height, width = self.extent.height(), self.extent.width()
+        for x in range(width):
             s = ti.Vector([0.0, 0.0, 0.0, 0.0])
-            for y in range(self.H):
-                v = self.prefix[y, ti.min(x + r, self.W - 1)]
+            for y in range(height):
+                v = self.prefix[y, ti.min(x + r, width - 1)]
                 if x - r - 1 >= 0:
                     v -= self.prefix[y, x - r - 1]
                 s += v
@@ -103,14 +117,14 @@ class LayerRefinement:
     @ti.func
     def _box(self, y, x, r):
         """The box of half-width r around (y, x), clamped to the image, from ``columns``."""
-        v = self.columns[ti.min(y + r, self.H - 1), x]
+        v = self.columns[ti.min(y + r, self.extent.height() - 1), x]
         if y - r - 1 >= 0:
             v -= self.columns[y - r - 1, x]
         return v
 
     @ti.kernel
     def _column_box(self, r: ti.i32):
-        for y, x in self.box:
+        for y, x in ti.ndrange(*self._pixels()):
             self.box[y, x] = self._box(y, x, r)
 
     def box_sum(self, r):
@@ -126,7 +140,7 @@ class LayerRefinement:
               occlusion: ti.template(), d_max: ti.f32):
         """The surface clamped to the searched range ``[0, d_max]`` (a quadratic can leave
         it; its candidates would then lie outside the sweep), non-finite values as 0."""
-        for y, x in self.surface:
+        for y, x in ti.ndrange(*self._pixels()):
             s = surface[y, x]
             if not (s >= 0.0 and s <= 3.0e38):
                 s = 0.0
@@ -139,7 +153,7 @@ class LayerRefinement:
         """Candidate centres and their span; no costs yet."""
         self.span[0] = 1 << 30
         self.span[1] = -(1 << 30)
-        for y, x in self.surface:
+        for y, x in ti.ndrange(*self._pixels()):
             b = ti.cast(ti.round(self.surface[y, x]), ti.i32)
             self.base[y, x] = b
             ti.atomic_min(self.span[0], b)
@@ -163,9 +177,10 @@ class LayerRefinement:
     @ti.kernel
     def _match_rows(self, left: ti.template(), right: ti.template(), d: ti.i32):
         """Row prefix sums of the matching source at disparity d."""
-        for y in range(self.H):
+        width = self.extent.width()
+        for y in range(self.extent.height()):
             s = ti.Vector([0.0, 0.0, 0.0, 0.0])
-            for x in range(self.W):
+            for x in range(width):
                 s += self._match(left, right, y, x, d)
                 self.prefix[y, x] = s
 
@@ -173,7 +188,7 @@ class LayerRefinement:
     def _store(self, d: ti.i32, R: ti.i32, r: ti.i32):
         """The layer-restricted window mean (the box of half-width r) at disparity d, for
         the pixels whose candidate range holds d and whose right pixel is in the image."""
-        for y, x in self.base:
+        for y, x in ti.ndrange(*self._pixels()):
             k = d - self.base[y, x] + R
             if 0 <= k <= 2 * R and x - d >= 0:
                 lab = self.label[y, x]
@@ -186,7 +201,7 @@ class LayerRefinement:
     def _select(self, R: ti.i32, ratio: ti.f32):
         """Per pixel: the distinct, interior best candidate (peak ratio), refined to the
         parabola's vertex; its residual against the surface and its weight (1 or 0)."""
-        for y, x in self.surface:
+        for y, x in ti.ndrange(*self._pixels()):
             best = NO_COST
             kb = -1
             for k in range(2 * R + 1):
@@ -215,7 +230,7 @@ class LayerRefinement:
 
     @ti.kernel
     def _residual_source(self):
-        for y, x in self.source:
+        for y, x in ti.ndrange(*self._pixels()):
             w = self.weight[y, x]
             fg = self.label[y, x] == 0
             v = w * self.residual[y, x]
@@ -225,13 +240,13 @@ class LayerRefinement:
     @ti.kernel
     def _accumulate(self, weight: ti.f32):
         """``average = box`` for weight 1, ``average += weight * box`` otherwise."""
-        for y, x in self.average:
+        for y, x in ti.ndrange(*self._pixels()):
             self.average[y, x] = weight * self.box[y, x] + \
                 ti.select(weight < 1.0, self.average[y, x], 0.0)
 
     @ti.kernel
     def _apply(self, d_max: ti.f32):
-        for y, x in self.surface:
+        for y, x in ti.ndrange(*self._pixels()):
             lab = self.label[y, x]
             den = self.average[y, x][2 + lab]
             s = self.surface[y, x]

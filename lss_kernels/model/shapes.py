@@ -50,30 +50,71 @@ def to_pixel_coefficients(theta, height, width, scale=1.0):
 @ti.data_oriented
 class GlobalShapes:
     """Owns Theta (``theta[j, i]``: j = 0 foreground, 1 background; normalised basis,
-    cyclopean disparity units) and the reduction tree."""
+    cyclopean disparity units) and the reduction tree.
+
+    Its fields are in the pool's bucket tree and the kernels read the image's size and the
+    normalisation at run time (from the pool's
+    :class:`~lss_kernels.kernels.backend.Extent` and :attr:`frame`), so they compile once
+    per size bucket.  The reduction has the levels of the bucket's tiles; those that the
+    image leaves out stay zero.
+    """
 
     def __init__(self, pool, height, width):
         self.H, self.W = int(height), int(width)
+        self.extent = pool.extent(self.H, self.W)
         self.cx, self.cy = (self.W - 1) / 2.0, (self.H - 1) / 2.0
         self.inv_s = 1.0 / (max(self.H, self.W) / 2.0)
-        self.theta = pool.field(ti.f32, (2, NB))
-        self.updated = pool.field(ti.i32, (2,))   # the last fit changed the shape
-        self.fitted = pool.field(ti.i32, (2,))    # the shape has been fitted at least once
-        self.rows = pool.field(ti.f32, (2,))
+        field = lambda dtype, shape: pool.field(dtype, shape, bucket=True)
+        # x_n = x inv_s + x_shift, y_n = y inv_s + y_shift (see :meth:`load`)
+        self.frame = field(ti.f32, (3,))
+        self.theta = field(ti.f32, (2, NB))
+        self.updated = field(ti.i32, (2,))   # the last fit changed the shape
+        self.fitted = field(ti.i32, (2,))    # the shape has been fitted at least once
+        self.rows = field(ti.f32, (2,))
         # reduction levels: tiles of TILE x TILE children until one cell is left
         self.tiles = []
-        h, w = self.H, self.W
+        h, w = self.extent.bucket
         while True:
             h, w = -(-h // TILE), -(-w // TILE)
-            self.tiles.append(pool.field(ti.f32, (h, w, 2, NT)))
+            self.tiles.append(field(ti.f32, (h, w, 2, NT)))
             if h == 1 and w == 1:
                 break
+        pool.on_load(self.load)
+
+    def load(self):
+        """Write the normalisation into :attr:`frame` (the pool calls it once finalised and
+        after it is zeroed).  ``(x - cx) inv_s`` is computed as ``x inv_s + (-cx inv_s)``, the
+        product rounded to float32: the form LLVM's fast-math gives it when ``cx`` and
+        ``inv_s`` are compile-time constants, so the shapes are those of kernels compiled
+        for one size, bit for bit."""
+        f32 = np.float32
+        inv_s = f32(self.inv_s)
+        self.frame.from_numpy(np.array([f32(-f32(self.cx)) * inv_s,
+                                        f32(-f32(self.cy)) * inv_s, inv_s], np.float32))
+
+    @ti.func
+    def normalised(self, x, y):
+        """Normalised coordinates ``(x_n, y_n)`` of real cyclopean pixel coordinates."""
+        inv_s = self.frame[2]
+        return x * inv_s + self.frame[0], y * inv_s + self.frame[1]
+
+    @ti.func
+    def value_of_size(self, j, x, y):
+        """:meth:`value` with the normalisation as compile-time constants: a kernel that
+        uses it compiles once per image size.  LLVM's fast-math reassociates the quadratic
+        around its constants in ways that no run-time form reproduces in every context (the
+        ray cast's fixed-point steps); kernels that must keep those exact float results use
+        it."""
+        xn = (x - self.cx) * self.inv_s
+        yn = (y - self.cy) * self.inv_s
+        t0, t1, t2 = self.theta[j, 0], self.theta[j, 1], self.theta[j, 2]
+        t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
+        return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
 
     @ti.func
     def value(self, j, x, y):
         """Theta_j at real cyclopean pixel coordinates (x, y)."""
-        xn = (x - self.cx) * self.inv_s
-        yn = (y - self.cy) * self.inv_s
+        xn, yn = self.normalised(x, y)
         t0, t1, t2 = self.theta[j, 0], self.theta[j, 1], self.theta[j, 2]
         t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
         return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
@@ -113,51 +154,66 @@ class GlobalShapes:
         ``w x_n^p`` (p <= 4) and ``w d x_n^p`` (p <= 2) over its pixels, and the row's sums
         enter the tile's 21 + 6 terms times the powers of its y_n: 16 multiply-adds per pixel
         and region instead of 54."""
+        height, width = self.extent.height(), self.extent.width()
         for ty, tx in ti.ndrange(out.shape[0], out.shape[1]):
-            acc = ti.Matrix.zero(ti.f32, 2, NT)
-            for iy in range(TILE):
-                y = ty * TILE + iy
-                if y < self.H:
-                    row = ti.Matrix.zero(ti.f32, 2, 9)   # sum w x^p (p <= 4), w d x^p, n
-                    for ix in range(TILE):
-                        x = tx * TILE + ix
-                        if x < self.W:
-                            xn = (ti.cast(x, ti.f32) - self.cx) * self.inv_s
-                            d = target[y, x]
-                            w_j = weights.region_weights(y, x)
-                            for j in ti.static(range(2)):
-                                w = w_j[j]
-                                if w > 0:
-                                    wp = w
-                                    for q in ti.static(range(5)):
-                                        row[j, q] += wp
-                                        if ti.static(q < 3):
-                                            row[j, 5 + q] += wp * d
-                                        wp *= xn
-                                    row[j, 8] += 1.0
-                    yn = (ti.cast(y, ti.f32) - self.cy) * self.inv_s
-                    ypow = ti.Vector([1.0, yn, yn * yn, yn * yn * yn, yn * yn * yn * yn])
-                    for j in ti.static(range(2)):
-                        for n in ti.static(range(len(_PAIRS))):
-                            px, py = ti.static(_monomial(*_PAIRS[n]))
-                            acc[j, n] += row[j, px] * ypow[py]
-                        for a in ti.static(range(NB)):
-                            px, py = ti.static(_EXPONENTS[a])
-                            acc[j, 21 + a] += row[j, 5 + px] * ypow[py]
-                        acc[j, 27] += row[j, 8]
-            for j, n in ti.static(ti.ndrange(2, NT)):
-                out[ty, tx, j, n] = acc[j, n]
+            if ty < self._tiles_of(height, 0) and tx < self._tiles_of(width, 0):
+                acc = ti.Matrix.zero(ti.f32, 2, NT)
+                for iy in range(TILE):
+                    y = ty * TILE + iy
+                    if y < height:
+                        row = ti.Matrix.zero(ti.f32, 2, 9)   # sum w x^p (p <= 4), w d x^p, n
+                        for ix in range(TILE):
+                            x = tx * TILE + ix
+                            if x < width:
+                                xn, _ = self.normalised(ti.cast(x, ti.f32), 0.0)
+                                d = target[y, x]
+                                w_j = weights.region_weights(y, x)
+                                for j in ti.static(range(2)):
+                                    w = w_j[j]
+                                    if w > 0:
+                                        wp = w
+                                        for q in ti.static(range(5)):
+                                            row[j, q] += wp
+                                            if ti.static(q < 3):
+                                                row[j, 5 + q] += wp * d
+                                            wp *= xn
+                                        row[j, 8] += 1.0
+                        _, yn = self.normalised(0.0, ti.cast(y, ti.f32))
+                        ypow = ti.Vector([1.0, yn, yn * yn, yn * yn * yn, yn * yn * yn * yn])
+                        for j in ti.static(range(2)):
+                            for n in ti.static(range(len(_PAIRS))):
+                                px, py = ti.static(_monomial(*_PAIRS[n]))
+                                acc[j, n] += row[j, px] * ypow[py]
+                            for a in ti.static(range(NB)):
+                                px, py = ti.static(_EXPONENTS[a])
+                                acc[j, 21 + a] += row[j, 5 + px] * ypow[py]
+                            acc[j, 27] += row[j, 8]
+                for j, n in ti.static(ti.ndrange(2, NT)):
+                    out[ty, tx, j, n] = acc[j, n]
 
     @ti.func
-    def _from_tiles(self, src: ti.template(), out: ti.template()):
+    def _tiles_of(self, n, level: ti.template()):
+        """Tiles along an axis of ``n`` pixels at reduction level ``level`` (run time)."""
+        tiles = n
+        for _ in ti.static(range(level + 1)):
+            tiles = (tiles + TILE - 1) // TILE
+        return tiles
+
+    @ti.func
+    def _from_tiles(self, src: ti.template(), out: ti.template(), level: ti.template()):
+        """Level ``level`` of the reduction (``out``) from the level below (``src``), over
+        the tiles that the image covers."""
+        height, width = self.extent.height(), self.extent.width()
+        rows, columns = self._tiles_of(height, level - 1), self._tiles_of(width, level - 1)
         for ty, tx, j, n in out:
-            s = 0.0
-            for iy, ix in ti.ndrange(TILE, TILE):
-                y = ty * TILE + iy
-                x = tx * TILE + ix
-                if y < src.shape[0] and x < src.shape[1]:
-                    s += src[y, x, j, n]
-            out[ty, tx, j, n] = s
+            if ty < self._tiles_of(height, level) and tx < self._tiles_of(width, level):
+                s = 0.0
+                for iy, ix in ti.ndrange(TILE, TILE):
+                    y = ty * TILE + iy
+                    x = tx * TILE + ix
+                    if y < rows and x < columns:
+                        s += src[y, x, j, n]
+                out[ty, tx, j, n] = s
 
     @ti.func
     def _solve_root(self, root: ti.template()):
@@ -218,7 +274,7 @@ class GlobalShapes:
         :class:`WeightPlanes`.  One launch: the reduction's levels run in order."""
         self._from_pixels(weights, target, self.tiles[0])
         for i in ti.static(range(1, len(self.tiles))):
-            self._from_tiles(self.tiles[i - 1], self.tiles[i])
+            self._from_tiles(self.tiles[i - 1], self.tiles[i], i)
         self._solve_root(self.tiles[-1])
 
     def set(self, theta_fg, theta_bg):

@@ -104,13 +104,13 @@ def state_from_solver(solver) -> IterationState:
     for lev in h.levels:
         m = lev.margin
         costs.append(lev.cost.to_numpy()[m:m + H, m:m + W].astype(np.float64))
-    f64 = lambda f: f.to_numpy().astype(np.float64)
+    f64 = lambda f: solver.extent.image(f).astype(np.float64)
     prec = f64(h.precision)
     return IterationState(
         costs=costs, b_occ=f64(solver.costs.b_occ), edge_left=f64(solver.costs.edge_left),
         edge_right=f64(solver.costs.edge_right), phi=f64(solver.levelset.phi),
         D=f64(solver.levelset.D), delta_theta=f64(solver.occ.delta_theta),
-        theta=f64(solver.shapes.theta), iteration=int(solver.iteration),
+        theta=solver.shapes.theta.to_numpy().astype(np.float64), iteration=int(solver.iteration),
         fitted=tuple(bool(v) for v in solver.shapes.fitted.to_numpy()),
         extra=dict(consensus_mean=f64(h.consensus_mean), precision=prec,
                    phi_plus=f64(solver.occ.phi_plus)))
