@@ -50,8 +50,9 @@ import numpy as np
 
 from .model.init import InitError
 
-__all__ = ["MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE", "MIN_JUMP", "PERIODIC", "PERIODIC_AREA", "RECOVERY",
-           "collapse", "model_health", "periodic_fraction", "periodicity", "with_recovery"]
+__all__ = ["MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE", "MIN_JUMP", "PERIODIC",
+           "PERIODIC_AREA", "RECOVERY", "collapse", "layer_offsets", "model_health",
+           "periodic_fraction", "periodicity", "with_recovery"]
 
 #: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
 MIN_JUMP = 1.0
