@@ -99,6 +99,9 @@ class Solver:
     profile : bool
         Synchronise after every stage to time it (slightly slower).
 
+    Built while no other is open, it restarts Taichi to reuse compiled kernels
+    (:func:`~lss_kernels.kernels.backend.fresh_numbering`).
+
     Examples
     --------
     >>> s = Solver(left, right, 64, (80, 60, 30, 25))          # doctest: +SKIP
@@ -111,10 +114,7 @@ class Solver:
                  profile=False):
         from .validate import check_inputs
         t_start = time.perf_counter()
-        if arch is not None:
-            backend.init(arch=arch)
-        else:
-            backend.ensure_init()
+        backend.before_solver(arch)
         self.params = params if params is not None else Params()
         if not isinstance(self.params, Params):
             raise TypeError(f"params: expected lss_kernels.Params, got {type(params).__name__}")

@@ -36,3 +36,16 @@ def paper15(request):
     if not folder or not Path(folder).is_dir():
         pytest.skip("the paper's scenes: set LSS_PAPER15 or pass --paper15 DIR")
     return Path(folder)
+
+
+@pytest.fixture
+def fresh_taichi(ti_arch):
+    """Taichi started again before a test that builds a solver while a module fixture still
+    holds fields that no later test of the module uses (they do not survive it).  A new
+    solver does this itself when none of the library's fields is alive
+    (:func:`lss_kernels.kernels.backend.fresh_numbering`), and then loads the kernels that
+    an earlier solver of its size bucket and parameters compiled instead of compiling them
+    again; a live fixture's solver would stop it."""
+    from lss_kernels.kernels import backend
+    backend.restart()
+    return ti_arch

@@ -5,6 +5,7 @@ import inspect
 import textwrap
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 import taichi as ti
 from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
@@ -190,3 +191,73 @@ def test_probe_of_a_backend_the_machine_lacks_answers_instead_of_crashing(monkey
     assert isinstance(usable, bool) and reason
     if lacks_cuda:
         assert not usable
+
+
+REUSE_SCRIPT = """
+import sys
+from lss_kernels import solve
+from lss_kernels.kernels import backend
+from lss_kernels.params import Params
+from lss_kernels.scenes import make_scene
+
+backend.init("cpu", threads=1, offline_cache=True, reuse_kernels=sys.argv[1] == "reuse")
+scene = make_scene("tiny")
+for _ in range(int(sys.argv[2])):
+    # three iterations: the prior and validity enter at the second; no refinement
+    solve(scene.left, scene.right, scene.d_max, scene.init_ellipse,
+          params=Params(max_iterations=3, stop_fraction=0.0, refine=False, recover=False))
+"""
+
+
+def _entries_after(tmp_path, mode, solves):
+    """The offline cache's kernels after a fresh process ran ``solves`` solves (Taichi
+    writes the cache at exit)."""
+    import os
+    import subprocess
+    import sys
+    cache = tmp_path / f"{mode}{solves}"
+    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=str(cache))
+    proc = subprocess.run([sys.executable, "-c", REUSE_SCRIPT, mode, str(solves)], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return {p.name for p in cache.rglob("*.tic")}
+
+
+@pytest.mark.slow
+def test_a_second_solve_in_one_process_compiles_nothing(tmp_path, ti_arch):
+    """``solve()`` twice in one process (a robot's loop): the second solver starts Taichi
+    again first and loads every kernel the first compiled; with ``reuse_kernels=False`` its
+    SNodes are numbered after the first's and every kernel compiles again."""
+    if ti_arch != "cpu":
+        pytest.skip("the offline cache is exercised on the CPU")
+    one = _entries_after(tmp_path, "reuse", 1)
+    assert one and _entries_after(tmp_path, "reuse", 2) == one
+    assert len(_entries_after(tmp_path, "no-reuse", 2) - one) >= len(one) // 2
+
+
+def test_a_new_solver_starts_taichi_again_only_when_no_field_is_alive(ti_arch):
+    from lss_kernels import Params, Solver
+    from lss_kernels.kernels import backend
+    from lss_kernels.scenes import make_scene
+    scene = make_scene("tiny")
+    params = Params(max_iterations=1, refine=False)
+    build = lambda: Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse,
+                           params=params)
+    a = build()
+    start = backend.generation()
+    a.step()
+    phi = a.levelset.extent.image(a.levelset.phi)
+    b = build()                                 # `a` is alive: no restart
+    assert backend.generation() == start
+    np.testing.assert_array_equal(a.levelset.extent.image(a.levelset.phi), phi)
+    b.close()
+    a.close()
+    c = build()                                 # nothing alive: numbered from 0 again
+    assert backend.generation() == start + 1
+    stale = backend.FieldPool()
+    stale.generation = start                    # a pool of the Taichi that is gone
+    stale._trees = list(c.pool._trees)
+    stale.destroy()                             # drops them without freeing c's trees
+    c.step()
+    assert np.isfinite(c.levelset.extent.image(c.levelset.phi)).all()
+    c.close()

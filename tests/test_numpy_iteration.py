@@ -109,7 +109,7 @@ def test_median_and_reinitialisation():
     assert sd[0, 10] == pytest.approx(-0.01 * (5 - 0.5))
 
 
-def test_one_iteration_at_a_width_of_partial_lane_blocks(ti_arch):
+def test_one_iteration_at_a_width_of_partial_lane_blocks(fresh_taichi):
     """At a width of 61 pixels (7 blocks of 8 lanes and a partial one) the first iteration's
     phi, its foreground and Theta match the specification as at 56 pixels."""
     from lss_kernels.solver import Solver
@@ -129,7 +129,7 @@ def test_one_iteration_at_a_width_of_partial_lane_blocks(ti_arch):
 
 
 @pytest.mark.parametrize("width", [56, 61])
-def test_a_single_patch_level_matches_the_specification(ti_arch, width):
+def test_a_single_patch_level_matches_the_specification(fresh_taichi, width):
     """With one level of patches the pixels' consensus reads that level's relays one patch
     centre beyond the image on every side: the level keeps that margin.  Three iterations
     (the prior and validity enter at the second, phi is re-initialised at the third); at 61

@@ -4,7 +4,9 @@ The library never calls ``ti.init`` on import: entry points (the CLI, demos, ben
 pytest fixture) call :func:`init` once.  Kernels compiled by the solver are cached on disk by
 Taichi's offline cache so that a second run of the CLI skips most of the compile time.
 """
+import gc
 import os
+import weakref
 
 import numpy as np
 import taichi as ti
@@ -14,7 +16,10 @@ ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu", "auto")
 #: What every command runs on unless told otherwise: CUDA if a device answers, else the CPU.
 DEFAULT_ARCH = "auto"
 
-_state = {"arch": None, "threads": None, "kwargs": None}
+_state = {"arch": None, "threads": None, "kwargs": None, "generation": 0, "reuse": True}
+#: The library's SNode trees of the current Taichi that are not destroyed yet (pools, the
+#: distance transforms' scratch): see :func:`fresh_numbering`.
+_live = weakref.WeakSet()
 
 #: Memory order of a ``(H, W, c_max)`` volume that is read at a disparity per pixel (the
 #: Eq. 2 step's matching costs, B at Theta_1): rows, then disparities, then columns, so that
@@ -100,7 +105,7 @@ def _stderr_line(text):
 
 
 def init(arch: str | None = None, threads: int | None = None, offline_cache: bool = True,
-         debug: bool = False) -> str:
+         debug: bool = False, reuse_kernels: bool | None = None) -> str:
     """Initialise Taichi once per process and return the backend in use (``"cpu"``,
     ``"cuda"``, ...).
 
@@ -115,6 +120,11 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
         CPU threads for the CPU backend (``None``: Taichi's default, all cores).
     offline_cache : bool
         Keep compiled kernels on disk between runs.
+    reuse_kernels : bool or None
+        Let every new solver start Taichi again first when none of the library's fields is
+        alive (:func:`fresh_numbering`), so that it loads the kernels compiled for its size
+        bucket from the offline cache; ``False`` if you keep Taichi fields of your own
+        between solves.  ``None`` keeps the current setting (default ``True``).
 
     Calling again with the same settings is a no-op; different settings re-initialise Taichi
     (every field allocated before becomes invalid, so do this before building a solver).
@@ -125,6 +135,8 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
         raise ValueError(f"arch: expected one of {', '.join(ARCHES)}, got {arch!r}")
     if threads is not None and (not isinstance(threads, int) or threads < 1):
         raise ValueError(f"threads: expected a positive integer, got {threads!r}")
+    if reuse_kernels is not None:
+        _state["reuse"] = bool(reuse_kernels)
     arch = resolve(arch, log=_stderr_line)
     if _state["arch"] == arch and _state["threads"] == threads:
         return arch
@@ -148,6 +160,7 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
         raise ValueError(f"arch: {arch!r} is not available on this machine "
                          f"({str(exc).splitlines()[0]})") from None
     _state["arch"], _state["threads"], _state["kwargs"] = arch, threads, kwargs
+    _started()
     return arch
 
 
@@ -163,6 +176,62 @@ def restart() -> None:
     if _state["kwargs"] is None:
         raise RuntimeError("backend.restart: Taichi was not initialised by backend.init")
     ti.init(**_state["kwargs"])
+    _started()
+
+
+def _started():
+    _state["generation"] += 1
+    _live.clear()
+
+
+def allocated(owner) -> int:
+    """Record that ``owner`` (a pool, a scratch buffer) holds SNode trees of the current
+    Taichi until it calls :func:`released`; returns the current :func:`generation`."""
+    _live.add(owner)
+    return _state["generation"]
+
+
+def released(owner) -> None:
+    _live.discard(owner)
+
+
+def fresh_numbering() -> bool:
+    """Start Taichi again before a new solver when fields were declared since Taichi last
+    started and none of the library's is alive; returns whether it did.
+
+    Taichi's offline cache keys a kernel on the SNodes it touches, whose ids count every
+    node declared before in the process.  A solver built first after a start numbers its
+    SNodes as the first solver of a fresh process does, so it loads the kernels that any
+    earlier solver of its size bucket and parameters compiled (in this process or another:
+    Taichi writes the cache when it restarts and at exit) instead of compiling them again --
+    without this, a second ``solve()`` in one process compiled all its kernels again.
+    Skipped when ``init(reuse_kernels=False)`` was asked for or Taichi was started by
+    someone else; Taichi fields of your own do not survive it otherwise."""
+    if not _state["reuse"] or _state["kwargs"] is None:
+        return False
+    if ti.lang.impl.get_runtime().prog.get_snode_tree_size() == 0:
+        return False
+    if _live:
+        gc.collect()        # pools dropped without destroy() that only a cycle still holds
+        if _live:
+            return False
+    restart()
+    return True
+
+
+def before_solver(arch: str | None = None) -> str:
+    """What a new solver does first: :func:`init` with ``arch`` if given (else
+    :func:`ensure_init`), then :func:`fresh_numbering`; returns the backend in use."""
+    arch = init(arch=arch) if arch is not None else ensure_init()
+    fresh_numbering()
+    return arch
+
+
+def generation() -> int:
+    """How many times :func:`init` and :func:`restart` started Taichi in this process: SNode
+    trees of an earlier generation belong to a Taichi that is gone and must not be
+    destroyed again (their ids may name trees of the current one)."""
+    return _state["generation"]
 
 
 def ensure_init() -> str:
@@ -262,6 +331,7 @@ class FieldPool:
         self._loaders = []
         self.nbytes = 0
         self.fields = []
+        self.generation = None
 
     def extent(self, height, width):
         """The pool's :class:`Extent` of ``height x width`` images (one per size, shared by
@@ -329,6 +399,7 @@ class FieldPool:
 
     def finalize(self):
         self._trees = [b.finalize() for b in self._builders if b is not None]
+        self.generation = allocated(self)
         for load in self._loaders:
             load()
         return self
@@ -341,8 +412,11 @@ class FieldPool:
             load()
 
     def destroy(self):
-        for tree in self._trees:
-            tree.destroy()
+        """Free the pool's trees; a pool of an earlier :func:`generation` only drops them."""
+        if self.generation == generation():
+            for tree in self._trees:
+                tree.destroy()
+        released(self)
         self._trees = []
         self._shared = {}
         self._loaders = []

@@ -8,6 +8,8 @@ and the signed-distance re-initialisation of phi (2-D).
 
 import taichi as ti
 
+from . import backend
+
 INF = 1e20
 
 __all__ = ["DistanceTransform", "INF"]
@@ -41,11 +43,15 @@ class DistanceTransform:
         builder = ti.FieldsBuilder()
         builder.dense(ti.i, self.size).place(self.v, self.g, self.z)
         self._tree = builder.finalize()
+        self._generation = backend.allocated(self)
         self.nbytes = 4 * 3 * self.size
 
     def destroy(self) -> None:
-        """Free the scratch memory (the object cannot be used afterwards)."""
-        self._tree.destroy()
+        """Free the scratch memory (the object cannot be used afterwards); after a
+        :func:`~lss_kernels.kernels.backend.restart` Taichi has freed it already."""
+        if self._generation == backend.generation():
+            self._tree.destroy()
+        backend.released(self)
 
     @ti.func
     def _index(self, axis: ti.template(), line: ti.i32, i: ti.i32, n1, n2: ti.template()):
