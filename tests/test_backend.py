@@ -240,7 +240,7 @@ def test_a_new_solver_starts_taichi_again_only_when_no_field_is_alive(ti_arch):
     from lss_kernels.kernels import backend
     from lss_kernels.scenes import make_scene
     scene = make_scene("tiny")
-    params = Params(max_iterations=1, refine=False)
+    params = Params(max_iterations=1)          # the fields of every default tiny solve
     build = lambda: Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse,
                            params=params)
     a = build()

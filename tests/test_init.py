@@ -273,7 +273,7 @@ def test_cli_without_init_uses_auto_and_reports_it(tmp_path):
     assert "rule" in summary["init"] and summary["init"]["seconds"] > 0
 
 
-def test_eval_with_init_from_the_true_box(tmp_path, ti_arch):
+def test_eval_with_init_from_the_true_box(tmp_path, fresh_taichi):
     from lss_kernels.apps.evaluate import run_eval
     from lss_kernels.scenes import write_scene
     write_scene(tmp_path / "data" / "a", "easy", seed=1)
