@@ -22,6 +22,10 @@ from lss_kernels.scenes import write_scene  # noqa: E402
 SCENES = ("s0", "s1", "s2")
 ITERATIONS = 5
 FAST = Params(max_iterations=ITERATIONS)
+#: The workers' CPU threads: those of the in-process tests (Taichi's default, every core),
+#: since Taichi's offline cache keys kernels on them too, so that the workers load the
+#: kernels of the tiny scenes that earlier tests compiled
+THREADS = os.cpu_count()
 FILES = {"disparity.pfm", "surface.pfm", "occlusion.png", "foreground.png", "disparity.png", "overlay.png",
          "summary.json"}
 MAPS = ("disparity.pfm", "occlusion.png", "foreground.png")
@@ -37,16 +41,18 @@ def scenes(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def cluster():
+def cluster(ti_arch):
     """A local cluster of two worker processes that tests join with ``scheduler``."""
+    from lss_kernels.kernels import backend
+    backend.restart()       # writes the kernels compiled so far to the cache the workers read
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=":0", silence_logs=logging.CRITICAL) as c:
         yield c
 
 
 def _batch(folders, out, **kwargs):
-    return run_batch(folders, out, params=kwargs.pop("params", FAST), arch="cpu", threads=1,
-                     progress=False, **kwargs)
+    return run_batch(folders, out, params=kwargs.pop("params", FAST), arch="cpu",
+                     threads=THREADS, progress=False, **kwargs)
 
 
 def _complete(out, names):
@@ -64,7 +70,7 @@ def _mtimes(out):
 def test_two_workers_write_the_maps_of_lss_solve(scenes, tmp_path):
     solves = [subprocess.Popen(
         [sys.executable, "-m", "lss_kernels.apps.cli", "solve", "--scene", str(scenes / name),
-         "--out", str(tmp_path / "solve" / name), "--arch", "cpu", "--threads", "1",
+         "--out", str(tmp_path / "solve" / name), "--arch", "cpu", "--threads", str(THREADS),
          "--param", f"max_iterations={ITERATIONS}", "--quiet"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for name in SCENES]
     report = _batch([scenes / n for n in SCENES], tmp_path / "batch", workers=2)
@@ -102,8 +108,8 @@ def test_a_failing_pair_goes_to_failures_csv_and_the_others_finish(scenes, clust
     (bad / "left.png").write_bytes(b"not a png")
     out = tmp_path / "out"
     code = main(["batch", str(scenes / "s0"), str(bad), str(scenes / "s1"), "--out", str(out),
-                 "--scheduler", cluster.scheduler_address, "--arch", "cpu", "--threads", "1",
-                 "--max-iterations", str(ITERATIONS)])
+                 "--scheduler", cluster.scheduler_address, "--arch", "cpu",
+                 "--threads", str(THREADS), "--max-iterations", str(ITERATIONS)])
     assert code == 1
     _complete(out, ("s0", "s1"))
     with open(out / "failures.csv") as f:
@@ -123,7 +129,8 @@ def test_a_worker_killed_in_the_middle_leaves_no_half_written_folder(scenes, clu
     finished = {}
     batch = threading.Thread(target=lambda: finished.update(report=_batch(
         [scenes / n for n in SCENES], out, scheduler=cluster.scheduler_address,
-        params=Params(max_iterations=ITERATIONS + 1))))    # a new solver: a longer first pair
+        # pairs of a few seconds: long enough to be killed in the middle
+        params=Params(max_iterations=400, stop_fraction=0.0))))
     batch.start()
     deadline = time.monotonic() + 60
     while not (partials := list(out.glob(".*.partial-*"))):

@@ -80,6 +80,7 @@ def test_cli_argument_errors_exit_2(tmp_path, capsys, argv, match):
     assert match in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_lss_demo_with_no_arguments(tmp_path):
     """``lss demo`` exactly as a new user types it, in a fresh process: the default arch
     (``auto``) runs on the CPU where there is no GPU (CI's machine), with one line saying so,
@@ -103,7 +104,6 @@ def test_lss_demo_with_no_arguments(tmp_path):
     assert iio.imread(out / "patch.png").ndim == 3
 
 
-@pytest.mark.slow
 def test_demo_end_to_end_on_tiny_scene(ti_arch, tmp_path, capsys):
     pytest.importorskip("lss_kernels.scenes")
     out = tmp_path / "demo"

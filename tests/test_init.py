@@ -254,9 +254,9 @@ def test_cli_point_outside_the_image_exits_2_and_writes_nothing(tmp_path):
 
 def test_cli_auto_on_a_single_plane_exits_2_and_writes_nothing(tmp_path):
     rng = np.random.default_rng(0)
-    right = rng.random((48, 96, 3)).astype(np.float32)
+    right = rng.random((48, 64, 3)).astype(np.float32)     # the tiny scenes' size and range
     left = np.roll(right, 6, axis=1)              # one fronto-parallel plane at d = 6
-    proc, out = _solve_cli(tmp_path, left, right, "--dmax", "16")
+    proc, out = _solve_cli(tmp_path, left, right, "--dmax", "14")
     assert proc.returncode == 2, proc.stderr
     assert "no foreground found" in proc.stderr and "Traceback" not in proc.stderr
     assert not out.exists()
