@@ -210,7 +210,8 @@ class Solver:
             t0 = time.perf_counter()
             self._first_consensus()
             init, init_frame = self.initialiser.find(init, self.hierarchy.consensus_mean,
-                                                     self.hierarchy.precision)
+                                                     self.hierarchy.precision,
+                                                     left=self.left_image)
             self.init_info = dict(self.initialiser.info, seconds=time.perf_counter() - t0)
         if isinstance(init, np.ndarray):
             region = lambda shift: shift_columns(init, shift)
