@@ -141,7 +141,7 @@ class Solver:
         self.initialiser = InitialRegion(pool, H, W)
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, self.params)
-        self.refinement = (LayerRefinement(pool, H, W, self.params.refine_passes,
+        self.refinement = (LayerRefinement(pool.annex(), H, W, self.params.refine_passes,
                                            self.params.refine_ratio)
                            if self.params.refine else None)
         pool.finalize()

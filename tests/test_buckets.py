@@ -267,3 +267,26 @@ def test_a_second_size_of_a_bucket_recompiles_only_the_per_size_kernels(tmp_path
                           env=env, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert json.loads(proc.stdout.splitlines()[-1]) == PER_SIZE_KERNELS
+
+
+def test_an_annex_is_finalised_zeroed_counted_and_destroyed_with_its_pool(ti_arch):
+    """An annex's trees come after the pool's (the pool's own trees, and so the keys of the
+    kernels that touch only them, do not change with it) and live and die with the pool."""
+    import taichi as ti
+    from lss_kernels.kernels.backend import FieldPool
+    pool = FieldPool()
+    a = pool.field(ti.f32, (3, 5), bucket=True)
+    annex = pool.annex()
+    b = annex.field(ti.i32, (4,))
+    extent = annex.extent(7, 9)                         # a loader that runs a kernel
+    pool.finalize()
+    assert annex.generation == pool.generation
+    assert extent.size.to_numpy().tolist() == [7, 9]
+    assert pool.nbytes == 3 * 5 * 4 + annex.nbytes and annex.nbytes >= 4 * 4
+    a.fill(2.0)
+    b.fill(3)
+    pool.zero()
+    assert not a.to_numpy().any() and not b.to_numpy().any()
+    assert extent.size.to_numpy().tolist() == [7, 9]     # the annex's loader ran again
+    pool.destroy()
+    assert pool._trees == [] and annex._trees == []

@@ -196,20 +196,14 @@ def released(owner) -> None:
 
 
 def fresh_numbering() -> bool:
-    """Start Taichi again before a new solver when fields were declared since Taichi last
-    started and none of the library's is alive; returns whether it did.
-
-    Taichi's offline cache keys a kernel on the SNodes it touches, whose ids count every
-    node declared before in the process.  A solver built first after a start numbers its
-    SNodes as the first solver of a fresh process does, so it loads the kernels that any
-    earlier solver of its size bucket and parameters compiled (in this process or another:
-    Taichi writes the cache when it restarts and at exit) instead of compiling them again --
-    without this, a second ``solve()`` in one process compiled all its kernels again.
-    Skipped when ``init(reuse_kernels=False)`` was asked for or Taichi was started by
-    someone else; Taichi fields of your own do not survive it otherwise."""
-    if not _state["reuse"] or _state["kwargs"] is None:
-        return False
-    if ti.lang.impl.get_runtime().prog.get_snode_tree_size() == 0:
+    """Start Taichi again before a new solver if fields were declared since it started and
+    none of the library's is alive; returns whether it did.  The offline cache keys a kernel
+    on its SNodes' ids, which count every node declared before in the process: so numbered
+    as in a fresh process, a solver loads what any earlier solver of its bucket and
+    parameters compiled (Taichi writes the cache when it restarts and at exit).  Not when
+    ``init(reuse_kernels=False)`` or Taichi was started by someone else."""
+    if (not _state["reuse"] or _state["kwargs"] is None
+            or ti.lang.impl.get_runtime().prog.get_snode_tree_size() == 0):
         return False
     if _live:
         gc.collect()        # pools dropped without destroy() that only a cycle still holds
@@ -228,9 +222,7 @@ def before_solver(arch: str | None = None) -> str:
 
 
 def generation() -> int:
-    """How many times :func:`init` and :func:`restart` started Taichi in this process: SNode
-    trees of an earlier generation belong to a Taichi that is gone and must not be
-    destroyed again (their ids may name trees of the current one)."""
+    """How many times Taichi was started: trees of an earlier one must not be destroyed."""
     return _state["generation"]
 
 
@@ -320,7 +312,9 @@ class FieldPool:
       most kernels of a solve -- compile once per bucket instead of once per size.
 
     The SNode ids count the nodes declared before in the process, which depend neither on
-    the range nor on the size.
+    the range nor on the size.  An optional part of a solve (the refinement) takes an
+    :meth:`annex`, whose trees come after the pool's: the pool's trees, and so the keys of
+    the kernels that touch only them, are then the same with the part or without it.
     """
 
     def __init__(self):
@@ -329,9 +323,21 @@ class FieldPool:
         self._trees = []
         self._shared = {}
         self._loaders = []
-        self.nbytes = 0
+        self._bytes = 0
         self.fields = []
         self.generation = None
+        self._annexes = []
+
+    @property
+    def nbytes(self):
+        """Bytes of the pool's fields and its annexes'."""
+        return self._bytes + sum(a.nbytes for a in self._annexes)
+
+    def annex(self):
+        """A pool of its own trees that this pool finalises (after its own), zeroes and
+        destroys with itself."""
+        self._annexes.append(FieldPool())
+        return self._annexes[-1]
 
     def extent(self, height, width):
         """The pool's :class:`Extent` of ``height x width`` images (one per size, shared by
@@ -380,7 +386,7 @@ class FieldPool:
         n = 1
         for s in shape:
             n *= s
-        self.nbytes += n * nbytes
+        self._bytes += n * nbytes
         self.fields.append(f)
         return f
 
@@ -398,10 +404,13 @@ class FieldPool:
                            tree)
 
     def finalize(self):
-        self._trees = [b.finalize() for b in self._builders if b is not None]
-        self.generation = allocated(self)
-        for load in self._loaders:
-            load()
+        parts = (self, *self._annexes)
+        for part in parts:          # every tree first: a kernel cannot run before
+            part._trees = [b.finalize() for b in part._builders if b is not None]
+            part.generation = allocated(part)
+        for part in parts:
+            for load in part._loaders:
+                load()
         return self
 
     def zero(self):
@@ -410,9 +419,13 @@ class FieldPool:
         _zero_all(tuple(self.fields))
         for load in self._loaders:
             load()
+        for annex in self._annexes:
+            annex.zero()
 
     def destroy(self):
         """Free the pool's trees; a pool of an earlier :func:`generation` only drops them."""
+        for annex in self._annexes:
+            annex.destroy()
         if self.generation == generation():
             for tree in self._trees:
                 tree.destroy()
