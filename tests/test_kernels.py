@@ -590,12 +590,6 @@ def _median_of(a, k, lanes=None, monkeypatch=None):
     return out
 
 
-def test_median_filter_matches_numpy(ti_arch):
-    rng = np.random.default_rng(9)
-    a = rng.standard_normal((H, W)).astype(np.float32)
-    np.testing.assert_array_equal(_median_of(a, 7), ref.median_filter(a, 7))
-
-
 def _run_ops(v, ops):
     for op, a, b, keep_min, keep_max in ops:
         if op == "swap":
@@ -667,17 +661,6 @@ def test_median_network_selects_the_medians_of_a_tile_of_windows(k):
             assert medians[j] == np.median(block[:, j:j + k])
 
 
-@pytest.mark.parametrize("lanes", [8, 1])
-@pytest.mark.parametrize("k, height, width", [(3, 5, 9), (5, 13, 11), (5, 5, 12), (7, 13, 1),
-                                              (7, 5, 2), (7, 13, 13)])
-def test_median_filter_matches_numpy_for_odd_and_tiny_sizes(ti_arch, monkeypatch, lanes, k,
-                                                            height, width):
-    """Rows in blocks of 8 (the CPU's; 13 rows end in a partial block) and of 1 (the GPUs')."""
-    rng = np.random.default_rng(k * 100 + width)
-    a = np.round(rng.standard_normal((height, width)) * 2).astype(np.float32)
-    np.testing.assert_array_equal(_median_of(a, k, lanes, monkeypatch), ref.median_filter(a, k))
-
-
 @pytest.mark.parametrize("k", [1, 7])
 def test_settle_counts_sign_flips_and_writes_eq3(ti_arch, k):
     """``LevelSet.settle``: phi = median(phi_next); ``flipped`` counts the pixels whose sign
@@ -709,12 +692,6 @@ def test_settle_counts_sign_flips_and_writes_eq3(ti_arch, k):
     assert (want == 6.5).any() and (want == 0.0).any()     # both clamps are exercised
     np.testing.assert_allclose(ls.extent.image(ls.D), want, atol=1e-5)
     pool.destroy()
-
-
-def test_median_filter_matches_numpy_with_ties_and_borders(ti_arch):
-    rng = np.random.default_rng(12)
-    a = np.round(rng.standard_normal((H, W)) * 2).astype(np.float32)
-    np.testing.assert_array_equal(_median_of(a, 7), ref.median_filter(a, 7))
 
 
 def _census_words(image):
@@ -891,3 +868,31 @@ def test_reinitialise_gives_scaled_signed_distance(levelset):
     dist_in = np.minimum(x - 10, 24 - x) + 0.5
     dist_out = np.where(x < 10, 10 - x, x - 24) - 0.5
     np.testing.assert_allclose(phi, 0.01 * np.where(mask, dist_in, -dist_out), atol=1e-6)
+
+
+# The median tests come last: they start Taichi again (conftest's ``fresh_taichi``; the
+# module's ``hierarchy`` and ``levelset`` fixtures are not used after this point), so that
+# each pool numbers its SNodes alike and the 7x7 network compiles once per lane width.
+
+
+def test_median_filter_matches_numpy(fresh_taichi):
+    rng = np.random.default_rng(9)
+    a = rng.standard_normal((H, W)).astype(np.float32)
+    np.testing.assert_array_equal(_median_of(a, 7), ref.median_filter(a, 7))
+
+
+@pytest.mark.parametrize("lanes", [8, 1])
+@pytest.mark.parametrize("k, height, width", [(3, 5, 9), (5, 13, 11), (5, 5, 12), (7, 13, 1),
+                                              (7, 5, 2), (7, 13, 13)])
+def test_median_filter_matches_numpy_for_odd_and_tiny_sizes(fresh_taichi, monkeypatch, lanes,
+                                                            k, height, width):
+    """Rows in blocks of 8 (the CPU's; 13 rows end in a partial block) and of 1 (the GPUs')."""
+    rng = np.random.default_rng(k * 100 + width)
+    a = np.round(rng.standard_normal((height, width)) * 2).astype(np.float32)
+    np.testing.assert_array_equal(_median_of(a, k, lanes, monkeypatch), ref.median_filter(a, k))
+
+
+def test_median_filter_matches_numpy_with_ties_and_borders(fresh_taichi):
+    rng = np.random.default_rng(12)
+    a = np.round(rng.standard_normal((H, W)) * 2).astype(np.float32)
+    np.testing.assert_array_equal(_median_of(a, 7), ref.median_filter(a, 7))
