@@ -49,3 +49,14 @@ def fresh_taichi(ti_arch):
     from lss_kernels.kernels import backend
     backend.restart()
     return ti_arch
+
+
+@pytest.fixture(scope="module")
+def region(ti_arch):
+    """An :class:`~lss_kernels.model.init.InitialRegion` of 24 x 40 pixels, one per module."""
+    from lss_kernels.kernels.backend import FieldPool
+    from lss_kernels.model.init import InitialRegion
+    pool = FieldPool()
+    r = InitialRegion(pool, 24, 40)
+    pool.finalize()
+    return r

@@ -17,16 +17,6 @@ def _iou(a, b):
     return (a & b).sum() / (a | b).sum()
 
 
-@pytest.fixture(scope="module")
-def region(ti_arch):
-    from lss_kernels.kernels.backend import FieldPool
-    from lss_kernels.model.init import InitialRegion
-    pool = FieldPool()
-    r = InitialRegion(pool, 24, 40)
-    pool.finalize()
-    return r
-
-
 def _quantised_depths(seed):
     """A background of slowly varying depth, a near block, a few holes; values on a 0.25
     grid so float32 and float64 compare exactly."""
@@ -91,7 +81,7 @@ def test_opening_and_widening_match_the_specification(region, radius):
     region.erode(radius)
     eroded = ~ref.dilate(~near, radius)          # the image's outside does not erode
     np.testing.assert_array_equal(region.inside.to_numpy() == 1, eroded)
-    region.dilate(radius)
+    region.dilate(radius, radius)
     labels = region.label.to_numpy()
     np.testing.assert_array_equal(labels >= 0, ref.dilate(eroded, radius))
     own = np.arange(24 * 40).reshape(24, 40)

@@ -8,16 +8,6 @@ import pytest
 from lss_kernels import Box, Point
 
 
-@pytest.fixture(scope="module")
-def region(ti_arch):
-    from lss_kernels.kernels.backend import FieldPool
-    from lss_kernels.model.init import InitialRegion
-    pool = FieldPool()
-    r = InitialRegion(pool, 24, 40)
-    pool.finalize()
-    return r
-
-
 def _widened_spec(mask, radius, left):
     """``mask`` dilated by ``radius`` rows up and down, ``radius`` columns to the right and
     ``left`` to the left (numpy)."""
@@ -40,7 +30,7 @@ def test_one_sided_widening_matches_the_specification(region, radius, left):
     mask[10:14, 18:22] = True
     region.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
     region.erode(0)
-    region.dilate_sides(radius, left)
+    region.dilate(radius, left)
     np.testing.assert_array_equal(region.label.to_numpy() >= 0,
                                   _widened_spec(mask, radius, left))
 

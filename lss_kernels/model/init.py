@@ -306,22 +306,11 @@ class InitialRegion:
             self.inside[y, x] = keep
 
     @ti.kernel
-    def dilate(self, radius: ti.i32):
-        """Each pixel with an ``inside`` pixel in its ``2 radius + 1`` square is labelled
-        with its own index, the others -1."""
-        for y, x in self.label:
-            hit = 0
-            for v, u in ti.ndrange((y - radius, y + radius + 1), (x - radius, x + radius + 1)):
-                if 0 <= v < self.H and 0 <= u < self.W and self.inside[v, u] == 1:
-                    hit = 1
-            self.label[y, x] = y * self.W + x if hit == 1 else -1
-
-    @ti.kernel
-    def dilate_sides(self, radius: ti.i32, left: ti.i32):
-        """:meth:`dilate` by a ``2 radius + 1`` rows by ``radius + left + 1`` columns
-        rectangle that reaches ``left`` columns to the left (``radius`` to the right): each
-        pixel with an ``inside`` pixel in rows ``y - radius .. y + radius``, columns
-        ``x - radius .. x + left``, is labelled with its own index, the others -1."""
+    def dilate(self, radius: ti.i32, left: ti.i32):
+        """``inside`` widened by ``radius`` up, down and to the right and by ``left`` to the
+        left (``left = radius``: the ``2 radius + 1`` square): each pixel with an ``inside``
+        pixel in rows ``y - radius .. y + radius``, columns ``x - radius .. x + left``, is
+        labelled with its own index, the others -1."""
         for y, x in self.label:
             hit = 0
             for v, u in ti.ndrange((y - radius, y + radius + 1), (x - radius, x + left + 1)):
@@ -392,10 +381,7 @@ class InitialRegion:
         """The labelled pixels widened by ``radius`` (towards the left by ``left`` if given),
         as a mask."""
         self.erode(0)
-        if left is None:
-            self.dilate(radius)
-        else:
-            self.dilate_sides(radius, left)
+        self.dilate(radius, radius if left is None else left)
         return self.label.to_numpy() >= 0
 
     def _point(self, point):
@@ -437,7 +423,7 @@ class InitialRegion:
         if background is not None:
             self.keep_above(background.astype(np.float32), CONTRAST)
         self.erode(OPENING // 2)
-        self.dilate(OPENING // 2)
+        self.dilate(OPENING // 2, OPENING // 2)
         rounds = self.until_stable(self.propagate)
         mask, facts = pick_region(self.label.to_numpy(), int(MIN_AREA * H * W))
         self.info = {"kind": "auto", "contrast_px": 2.0 * CONTRAST, "window": int(WINDOW * W),
@@ -451,7 +437,7 @@ class InitialRegion:
         # (where the object pulls the fit up, its rim is not above it)
         self.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
         self.erode(0)
-        self.dilate(REGROW)
+        self.dilate(REGROW, REGROW)
         mask = ((self.label.to_numpy() >= 0) & near) | mask
         self.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
         return self._widened()
