@@ -250,7 +250,7 @@ def _worker_cache(arch: str, threads: int | None):
         if _WORKER["cache"] is not None:
             _WORKER["cache"].close()
         backend.init(arch=arch, threads=threads)
-        _WORKER.update(setup=(arch, threads), cache=SolverCache(restart_taichi=True))
+        _WORKER.update(setup=(arch, threads), cache=SolverCache())
     return _WORKER["cache"]
 
 

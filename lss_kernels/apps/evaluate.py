@@ -88,20 +88,17 @@ def scene_start(scene: io.Scene, init=None):
     return scene_init(scene, init)
 
 
-def _solve(scene: io.Scene, params, trace: bool = False, restart: bool = False, init=None):
-    """Solve a scene with this process's solver; with ``trace``, also score the left view
-    at the end of every stop window and at the last iteration; with ``restart``, start
-    Taichi again before building a new solver (see :func:`lss_kernels.kernels.backend.restart`).
-    Returns the result, the trace rows and the seconds spent scoring them."""
+def _solve(scene: io.Scene, params, trace: bool = False, init=None):
+    """Solve a scene with this process's solver (a new one, after the last is closed, finds
+    the kernels compiled for its size: :func:`lss_kernels.kernels.backend.fresh_numbering`);
+    with ``trace``, also score the left view at the end of every stop window and at the last
+    iteration.  Returns the result, the trace rows and the seconds spent scoring them."""
     from ..solver import Solver
     init, frame = scene_start(scene, init)
     key = (scene.left.shape[:2], c_max(scene.d_max), params)
     solver = _SOLVER.get(key)
     if solver is None:
         _release_solver()
-        if restart:
-            from ..kernels import backend
-            backend.restart()
         solver = Solver(scene.left, scene.right, scene.d_max, init, params=params,
                         init_frame=frame)
         _SOLVER[key] = solver
@@ -142,8 +139,7 @@ def _solver_key(task):
         return (1, (), 0, str(scene_dir))
 
 
-def _run_method(method: str, scene: io.Scene, params, trace: bool = False,
-                restart: bool = False, init=None):
+def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=None):
     """Disparity and occlusion (left view) of one method on one scene, extra facts, and the
     seconds spent on the trace."""
     if method == "lss":
@@ -151,7 +147,7 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False,
         from ..recovery import with_recovery
 
         def run(p):
-            result, rows, spent = _solve(scene, p, trace, restart, init)
+            result, rows, spent = _solve(scene, p, trace, init)
             return result, (rows, spent)
         try:
             result, (rows, spent) = with_recovery(run, params, scene.d_max, scene.left)
@@ -174,13 +170,12 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False,
 
 
 def _run_one(scene_dir: str, method: str, run_dir: str, params, trace: bool = False,
-             restart: bool = False, init=None) -> dict:
+             init=None) -> dict:
     """Run, score and save one (scene, method); return the record written to result.json
     (``seconds`` leaves out the scoring of a trace)."""
     scene = io.load_scene(scene_dir)
     start = time.perf_counter()
-    disparity, occlusion, extra, spent = _run_method(method, scene, params, trace, restart,
-                                                     init)
+    disparity, occlusion, extra, spent = _run_method(method, scene, params, trace, init)
     seconds = time.perf_counter() - start - spent
     disparity = np.asarray(disparity, dtype=np.float32)
     occlusion = np.asarray(occlusion, dtype=bool)
@@ -222,8 +217,8 @@ def _check_methods(methods) -> tuple:
 
 def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs: int = 1,
              force: bool = False, arch: str = "cpu", params=None,
-             progress: bool = True, trace: bool = False,
-             restart_taichi: bool = False, scheduler: str | None = None, init=None) -> list:
+             progress: bool = True, trace: bool = False, scheduler: str | None = None,
+             init=None) -> list:
     """Run ``methods`` on every scene of ``dataset_dir``, score them and write the report.
 
     Parameters
@@ -253,12 +248,6 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
         ``trace``) and write ``convergence.csv``, ``convergence.md`` (accuracy against
         iterations, and where variants of the stopping rule would have stopped) and
         ``convergence.png``.  The scoring is left out of ``seconds``.
-    restart_taichi : bool
-        With ``jobs=1``: start Taichi again (:func:`lss_kernels.kernels.backend.restart`) before
-        each new solver, so that it finds the kernels a fresh process compiled for its image
-        size and search range, whatever ran before it.  Every Taichi field of the calling
-        process becomes invalid: ``lss eval`` sets it, as it owns its process.  Worker
-        processes (``jobs > 1`` or ``scheduler``) always do.
     scheduler : str or None
         Address of a running Dask scheduler: run there instead (``jobs`` is then unused).
     init : {None, "auto", "gt-point", "gt-box"}
@@ -303,7 +292,7 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
                                                    "skipped": True}
             else:
                 todo.append((os.fspath(scene_dir), method, os.fspath(run_dir), params,
-                             trace and method == "lss", restart_taichi or remote, init))
+                             trace and method == "lss", init))
 
     total = len(names) * len(methods)
     log = _Progress(total, enabled=progress)
@@ -429,8 +418,7 @@ def main_eval(args) -> int:
     try:
         rows = run_eval(args.dataset_dir, methods=methods, out=args.out, jobs=args.jobs,
                         force=args.force, arch=args.arch, progress=not args.quiet,
-                        trace=args.trace, restart_taichi=True, scheduler=args.scheduler,
-                        init=args.init)
+                        trace=args.trace, scheduler=args.scheduler, init=args.init)
     except (ValueError, FileNotFoundError, ImportError) as error:
         print(f"lss eval: error: {error}", file=sys.stderr)
         return 2

@@ -89,9 +89,8 @@ class SolverCache:
     parameters (:meth:`lss_kernels.Solver.reset`: no kernels to load again), and closes it
     when another one is needed."""
 
-    def __init__(self, restart_taichi=False):
+    def __init__(self):
         self.key, self.solver = None, None
-        self.restart_taichi = restart_taichi
 
     def solve(self, job, params, callback=None):
         """Solve ``job`` (solved again when the model collapses, :mod:`lss_kernels.recovery`);
@@ -117,9 +116,6 @@ class SolverCache:
             self.solver.reset(left, right, d_max, init, init_frame=job.init_frame)
         else:
             self.close()
-            if self.restart_taichi:
-                from ..kernels import backend
-                backend.restart()
             self.solver = Solver(left, right, d_max, init, params=params,
                                  init_frame=job.init_frame)
             self.key = key
