@@ -51,8 +51,8 @@ import numpy as np
 from .model.init import InitError
 
 __all__ = ["MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE", "MIN_JUMP", "PERIODIC",
-           "PERIODIC_AREA", "RECOVERY", "collapse", "layer_offsets", "model_health",
-           "periodic_fraction", "periodicity", "with_recovery"]
+           "PERIODIC_AREA", "RECOVERY", "SwappedViewsWarning", "collapse", "layer_offsets",
+           "model_health", "periodic_fraction", "periodicity", "with_recovery"]
 
 #: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
 MIN_JUMP = 1.0
@@ -173,7 +173,34 @@ def collapse(health: dict):
     return None
 
 
-def with_recovery(run, params, d_max, left=None):
+class SwappedViewsWarning(UserWarning):
+    """The pair's matches run the other way: the right image was probably passed first."""
+
+
+def _check_direction(left, right, d_max) -> dict:
+    """:func:`~lss_kernels.direction.match_direction` of the pair; warns when swapped.  An
+    invalid pair or range is left to the solver's own checks (no verdict: ``{}``)."""
+    import math
+    import numbers
+    import warnings
+    from .direction import match_direction
+    from .io import read_image
+    left, right = read_image(left, name="left"), read_image(right, name="right")
+    if (left.shape != right.shape or isinstance(d_max, bool)
+            or not isinstance(d_max, numbers.Real) or not math.isfinite(d_max)
+            or not 0 < d_max < left.shape[1]):
+        return {}
+    facts = match_direction(left, right, d_max)
+    if facts["swapped"]:
+        warnings.warn(SwappedViewsWarning(
+            f"the views look swapped: the right image matches the left one at x + d on "
+            f"{facts['reversed']:.0%} of its textured pixels and at x - d on "
+            f"{facts['stated']:.0%}; the left image must be the reference (x_right = "
+            f"x_left - d, d >= 0): pass the two images the other way round"), stacklevel=3)
+    return facts
+
+
+def with_recovery(run, params, d_max, left=None, right=None):
     """``run(params) -> (result, extra)`` once, and again when the model collapsed (and
     ``params.recover``); returns the ``(result, extra)`` kept, with ``result.recovery`` set.
 
@@ -182,10 +209,15 @@ def with_recovery(run, params, d_max, left=None):
     periodic over at least ``PERIODIC_AREA`` of its tiles, the first uses ``params``
     changed by ``PERIODIC`` and the second ``params`` (at once, without a retry, when the
     first finds no initial region: :class:`~lss_kernels.model.init.InitError`).  ``params``
-    None: the defaults; ``d_max``: the searched range (left-view pixels)."""
+    None: the defaults; ``d_max``: the searched range (left-view pixels).  With ``left``
+    and ``right``, the pair is first checked for swapped views
+    (:func:`lss_kernels.direction.match_direction`, recorded as ``direction``): a
+    :class:`SwappedViewsWarning` says so before the solve."""
     from .params import Params
     params = Params() if params is None else params
     record = {}
+    if left is not None and right is not None:
+        record["direction"] = _check_direction(left, right, d_max)
     first_params, second_params = params, params.replace(**RECOVERY)
     if params.recover and left is not None and second_params != params:
         from .io import read_image

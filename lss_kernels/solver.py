@@ -463,7 +463,8 @@ def solve(left, right, d_max, init, params=None, arch=None, callback=None, init_
     Parameters
     ----------
     left, right : array ``(H, W[, C])`` or path
-        Rectified pair; the left image is the reference (``x_right = x_left - d``).
+        Rectified pair; the left image is the reference (``x_right = x_left - d``; swapped
+        views warn :class:`~lss_kernels.recovery.SwappedViewsWarning` before the solve).
     d_max : float
         Largest disparity to search, left-view pixels.
     init : tuple ``(cx, cy, rx, ry)``, boolean array ``(H, W)``, ``"auto"``, Point or Box
@@ -496,4 +497,4 @@ def solve(left, right, d_max, init, params=None, arch=None, callback=None, init_
             return solver.run(callback), None
         finally:
             solver.close()
-    return with_recovery(run, params if params is not None else Params(), d_max, left)[0]
+    return with_recovery(run, params if params is not None else Params(), d_max, left, right)[0]

@@ -13,6 +13,7 @@ import argparse
 import importlib
 import os
 import sys
+import warnings
 
 if "--json" in sys.argv[1:]:
     # stdout carries one JSON object: no Taichi banner when backend imports Taichi
@@ -199,7 +200,12 @@ def main(argv=None):
         parser.print_help()
         return 2
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            # the library's warnings (swapped views) as one line each, every time
+            warnings.simplefilter("always", UserWarning)
+            warnings.showwarning = lambda message, *_, **__: print(
+                f"lss {args.command}: warning: {message}", file=sys.stderr)
+            return int(args.func(args) or 0)
     except (CliError, ValueError, FileNotFoundError, ImportError, TypeError) as exc:
         print(f"lss {args.command}: error: {exc}", file=sys.stderr)
         return 2

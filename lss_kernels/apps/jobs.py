@@ -102,7 +102,7 @@ class SolverCache:
             result, solver = self._run(job, p, callback)
             return result, (solver.left_image, solver.initial_foreground_left(),
                             solver.init_info)
-        return with_recovery(run, params, job.d_max, job.left)
+        return with_recovery(run, params, job.d_max, job.left, job.right)
 
     def _run(self, job, params, callback=None):
         """Solve ``job`` with a reused or new solver; returns ``(result, solver)``."""

@@ -1,0 +1,84 @@
+"""Which way a pair's matches run: a check for swapped views before the solve.
+
+The model reads the pair in the Middlebury convention: the left image is the reference and a
+left pixel ``x`` matches the right pixel ``x - d`` with ``d >= 0``.  Passed the other way
+round (the right image first), every match runs the other way, the searched range holds no
+true match, and the model explains nothing (on the tiny scene the foreground vanishes after
+18 iterations, and the retry of :mod:`lss_kernels.recovery` collapses too).  Nothing in the
+output says why, so the pair is examined first.
+
+On a grey copy of the pair, block-averaged to at most ``MAX_WIDTH`` columns, each pixel's
+best sum of absolute differences over a ``WINDOW`` square is found along the row for the
+stated direction (``x - s``, ``s = 1 .. d``) and for the reversed one (``x + s``), over the
+columns where both can be read.  A direction *wins* a pixel whose gradient is textured
+(mean absolute horizontal difference over the window above ``TEXTURE``) where its best cost
+is below ``MARGIN`` times the other's.  The pair looks swapped when the reversed direction
+wins at least ``SWAPPED_SHARE`` of the textured pixels and ``SWAPPED_RATIO`` times as many
+as the stated one.  A pair with no parallax (identical views, a distant scene) or with
+periodic texture matches both ways alike and is not flagged; nor is a pair with too little
+texture to tell (fewer than ``MIN_TEXTURED`` pixels).
+
+Measured on paper15 and the stress scenes (``python -m lss_kernels.stress``, seed 0): see
+``docs/design.md``.
+"""
+import math
+
+import numpy as np
+
+__all__ = ["MARGIN", "SWAPPED_RATIO", "SWAPPED_SHARE", "match_direction"]
+
+MAX_WIDTH = 320        # the check's image width at most, pixels (block averages)
+WINDOW = 5             # side of the square that sums absolute differences, pixels
+TEXTURE = 0.01         # mean |horizontal difference| of a textured window (grey in [0, 1])
+MARGIN = 0.8           # a direction wins a pixel where its cost is below MARGIN x the other's
+SWAPPED_SHARE = 0.5    # swapped: the reversed direction wins this share of textured pixels
+SWAPPED_RATIO = 3.0    # ... and this many times as many as the stated one
+MIN_TEXTURED = 200     # fewer textured pixels: no verdict
+
+
+def _box(a, k):
+    """Sums of ``a`` over ``k x k`` windows (valid part: ``(H - k + 1, W - k + 1)``)."""
+    c = np.pad(np.cumsum(np.cumsum(a, axis=0), axis=1), ((1, 0), (1, 0)))
+    return c[k:, k:] - c[:-k, k:] - c[k:, :-k] + c[:-k, :-k]
+
+
+def _grey(image, f):
+    g = np.asarray(image, np.float32)
+    g = g.mean(axis=2) if g.ndim == 3 else g
+    H, W = (g.shape[0] // f) * f, (g.shape[1] // f) * f
+    return g[:H, :W].reshape(H // f, f, W // f, f).mean(axis=(1, 3))
+
+
+def match_direction(left, right, d_max) -> dict:
+    """Whether the pair's matches run the stated way (``x_right = x_left - d``).
+
+    ``left``, ``right``: float images in [0, 1] of one shape (``(H, W)`` or ``(H, W, C)``);
+    ``d_max``: the searched range, left-view pixels.  Returns ``stated`` and ``reversed``
+    (the share of textured pixels each direction wins), ``textured`` (their count at the
+    check's scale), ``scale`` (the block size) and ``swapped`` (bool)."""
+    f = max(1, math.ceil(np.shape(left)[1] / MAX_WIDTH))
+    gl, gr = _grey(left, f), _grey(right, f)
+    H, W = gl.shape
+    D = min(max(1, math.ceil(float(d_max) / f)), (W - WINDOW) // 2)
+    facts = {"scale": f, "textured": 0, "stated": 0.0, "reversed": 0.0, "swapped": False}
+    if D < 1 or H < WINDOW:
+        return facts
+    cols = slice(D, W - D)                     # the columns both directions can read
+    best = []
+    for sign in (-1, 1):                       # -1: x - s (stated), +1: x + s (reversed)
+        cost = np.full((H - WINDOW + 1, W - 2 * D - WINDOW + 1), np.inf, np.float32)
+        for s in range(1, D + 1):
+            shifted = gr[:, D + sign * s:W - D + sign * s]
+            cost = np.minimum(cost, _box(np.abs(gl[:, cols] - shifted), WINDOW))
+        best.append(cost)
+    gradient = np.abs(np.diff(gl[:, cols], axis=1, append=gl[:, cols][:, -1:]))
+    textured = _box(gradient, WINDOW) > TEXTURE * WINDOW * WINDOW
+    n = int(textured.sum())
+    facts["textured"] = n
+    if n < MIN_TEXTURED:
+        return facts
+    stated = float((textured & (best[0] < MARGIN * best[1])).sum()) / n
+    reverse = float((textured & (best[1] < MARGIN * best[0])).sum()) / n
+    facts.update(stated=stated, reversed=reverse,
+                 swapped=reverse >= SWAPPED_SHARE and reverse >= SWAPPED_RATIO * stated)
+    return facts

@@ -1,0 +1,99 @@
+"""Swapped views are recognised before the solve (``lss_kernels.direction``) and reported."""
+import json
+import warnings
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from lss_kernels import Params, direction
+from lss_kernels.recovery import SwappedViewsWarning, with_recovery
+from lss_kernels.scenes import make_scene
+
+
+def shifted_pair(shift=4, shape=(40, 96), seed=0):
+    """Random texture as the left view and its copy moved left by ``shift`` as the right
+    one: ``right[:, x] = left[:, x + shift]``, so left pixel x matches right x - shift."""
+    rng = np.random.default_rng(seed)
+    left = rng.random(shape).astype(np.float32)
+    right = np.roll(left, -shift, axis=1)
+    return left, right
+
+
+def test_a_pair_in_the_stated_direction_is_not_swapped_and_the_reversed_one_is():
+    left, right = shifted_pair()
+    facts = direction.match_direction(left, right, 10)
+    assert not facts["swapped"] and facts["stated"] > 0.9 > 0.05 > facts["reversed"]
+    back = direction.match_direction(right, left, 10)
+    assert back["swapped"] and back["reversed"] > 0.9 and back["stated"] < 0.05
+
+
+def test_the_verdict_holds_for_colour_images_and_above_the_check_width():
+    left, right = shifted_pair(shift=6, shape=(40, 700))
+    colour = lambda g: np.repeat(g[..., None], 3, axis=2)
+    facts = direction.match_direction(colour(right), colour(left), 20)
+    assert facts["scale"] == 3 and facts["swapped"]
+
+
+def test_no_parallax_no_texture_or_stripes_give_no_verdict():
+    left, _ = shifted_pair()
+    same = direction.match_direction(left, left, 10)
+    assert not same["swapped"] and same["stated"] < 0.1 and same["reversed"] < 0.1
+    flat = direction.match_direction(np.full((40, 96), 0.5), np.full((40, 96), 0.5), 10)
+    assert flat["textured"] == 0 and not flat["swapped"]
+    x = np.arange(96)
+    stripes = np.tile((np.sin(2 * np.pi * x / 6) > 0).astype(np.float32), (40, 1))
+    striped = direction.match_direction(np.roll(stripes, 2, axis=1), stripes, 10)
+    assert not striped["swapped"]
+
+
+def test_the_rendered_scene_is_stated_and_its_mirror_swapped():
+    scene = make_scene("tiny")
+    assert not direction.match_direction(scene.left, scene.right, scene.d_max)["swapped"]
+    assert direction.match_direction(scene.right, scene.left, scene.d_max)["swapped"]
+
+
+def sound_model():
+    """A Result-like sound model (a 6 px jump in front, inside d_max = 10) for ``with_recovery``."""
+    from types import SimpleNamespace
+    phi = -np.ones((20, 30))
+    phi[5:15, 10:20] = 1.0
+    surface = np.where(phi > 0, 8.0, 2.0)
+    return SimpleNamespace(phi=phi, theta_fg=np.array([0, 0, 0, 0, 0, 8.0]),
+                           theta_bg=np.array([0, 0, 0, 0, 0, 2.0]), foreground=phi > 0,
+                           surface=surface, disparity=surface,
+                           occlusion=np.zeros((20, 30), bool), recovery={})
+
+
+def test_with_recovery_warns_before_the_solve_and_records_the_check():
+    left, right = shifted_pair()
+    order = []
+
+    def run(params):
+        order.append("solve")
+        return sound_model(), None
+    with pytest.warns(SwappedViewsWarning, match="pass the two images the other way round"):
+        result, _ = with_recovery(run, Params(), 10.0, right, left)
+    assert order == ["solve"] and result.recovery["direction"]["swapped"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SwappedViewsWarning)
+        result, _ = with_recovery(run, Params(), 10.0, left, right)
+    assert result.recovery["direction"]["swapped"] is False
+    result, _ = with_recovery(run, Params(), 10.0, left)          # no right image: no check
+    assert "direction" not in result.recovery
+
+
+def test_lss_solve_prints_the_warning_and_records_it(ti_arch, tmp_path, capsys):
+    from lss_kernels.apps.cli import main
+    scene = make_scene("tiny")
+    for name, image in (("left.png", scene.left), ("right.png", scene.right)):
+        iio.imwrite(tmp_path / name, (image * 255).astype(np.uint8))
+    out = tmp_path / "out"
+    assert main(["solve", str(tmp_path / "right.png"), str(tmp_path / "left.png"), "--dmax",
+                 str(scene.d_max), "--init", "ellipse:32,24,10,8", "--out", str(out),
+                 "--arch", ti_arch, "--quiet", "--param", "max_iterations=3",
+                 "--param", "recover=False"]) == 0
+    err = capsys.readouterr().err
+    assert "lss solve: warning: the views look swapped" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["recovery"]["direction"]["swapped"] is True
