@@ -18,8 +18,8 @@ as the stated one.  A pair with no parallax (identical views, a distant scene) o
 periodic texture matches both ways alike and is not flagged; nor is a pair with too little
 texture to tell (fewer than ``MIN_TEXTURED`` pixels).
 
-Measured on paper15 and the stress scenes (``python -m lss_kernels.stress``, seed 0): see
-``docs/design.md``.
+Measured on paper15 and the stress scenes (``python -m lss_kernels.stress``, seeds 0 and 2):
+see ``docs/design.md``.
 """
 import math
 
@@ -37,8 +37,9 @@ MIN_TEXTURED = 200     # fewer textured pixels: no verdict
 
 
 def _box(a, k):
-    """Sums of ``a`` over ``k x k`` windows (valid part: ``(H - k + 1, W - k + 1)``)."""
-    c = np.pad(np.cumsum(np.cumsum(a, axis=0), axis=1), ((1, 0), (1, 0)))
+    """Sums of ``a`` over ``k x k`` windows (valid part: ``(H - k + 1, W - k + 1)``; the
+    running sums in float64, which keep a window's sum exact to well below its pixels')."""
+    c = np.pad(np.cumsum(np.cumsum(a, axis=0, dtype=np.float64), axis=1), ((1, 0), (1, 0)))
     return c[k:, k:] - c[:-k, k:] - c[k:, :-k] + c[:-k, :-k]
 
 
@@ -66,7 +67,7 @@ def match_direction(left, right, d_max) -> dict:
     cols = slice(D, W - D)                     # the columns both directions can read
     best = []
     for sign in (-1, 1):                       # -1: x - s (stated), +1: x + s (reversed)
-        cost = np.full((H - WINDOW + 1, W - 2 * D - WINDOW + 1), np.inf, np.float32)
+        cost = np.full((H - WINDOW + 1, W - 2 * D - WINDOW + 1), np.inf)
         for s in range(1, D + 1):
             shifted = gr[:, D + sign * s:W - D + sign * s]
             cost = np.minimum(cost, _box(np.abs(gl[:, cols] - shifted), WINDOW))
