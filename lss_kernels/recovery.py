@@ -178,14 +178,15 @@ class SwappedViewsWarning(UserWarning):
 
 
 def _check_direction(left, right, d_max) -> dict:
-    """:func:`~lss_kernels.direction.match_direction` of the pair; warns when swapped.  An
-    invalid pair or range is left to the solver's own checks (no verdict: ``{}``)."""
+    """:func:`~lss_kernels.direction.match_direction` of the pair (``left`` already read);
+    warns when swapped.  An invalid pair or range is left to the solver's own checks (no
+    verdict: ``{}``)."""
     import math
     import numbers
     import warnings
     from .direction import match_direction
     from .io import read_image
-    left, right = read_image(left, name="left"), read_image(right, name="right")
+    right = read_image(right, name="right")
     if (left.shape != right.shape or isinstance(d_max, bool)
             or not isinstance(d_max, numbers.Real) or not math.isfinite(d_max)
             or not 0 < d_max < left.shape[1]):
@@ -215,13 +216,14 @@ def with_recovery(run, params, d_max, left=None, right=None):
     :class:`SwappedViewsWarning` says so before the solve."""
     from .params import Params
     params = Params() if params is None else params
+    from .io import read_image
     record = {}
+    left = read_image(left, name="left") if left is not None else None
     if left is not None and right is not None:
         record["direction"] = _check_direction(left, right, d_max)
     first_params, second_params = params, params.replace(**RECOVERY)
     if params.recover and left is not None and second_params != params:
-        from .io import read_image
-        fraction = periodic_fraction(read_image(left, name="left"))
+        fraction = periodic_fraction(left)
         record["periodic"] = fraction
         if fraction >= PERIODIC_AREA:
             first_params, second_params = params.replace(**PERIODIC), params
