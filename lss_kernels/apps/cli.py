@@ -200,9 +200,10 @@ def main(argv=None):
         parser.print_help()
         return 2
     try:
+        from ..recovery import SwappedViewsWarning
         with warnings.catch_warnings():
-            # the library's warnings (swapped views) as one line each, every time
-            warnings.simplefilter("always", UserWarning)
+            # warnings as one line each; swapped views every time (each pair of lss batch)
+            warnings.simplefilter("always", SwappedViewsWarning)
             warnings.showwarning = lambda message, *_, **__: print(
                 f"lss {args.command}: warning: {message}", file=sys.stderr)
             return int(args.func(args) or 0)
