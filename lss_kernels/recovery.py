@@ -181,15 +181,13 @@ def _check_direction(left, right, d_max) -> dict:
     """:func:`~lss_kernels.direction.match_direction` of the pair (``left`` already read);
     warns when swapped.  An invalid pair or range is left to the solver's own checks (no
     verdict: ``{}``)."""
-    import math
-    import numbers
     import warnings
     from .direction import match_direction
-    from .io import read_image
-    right = read_image(right, name="right")
-    if (left.shape != right.shape or isinstance(d_max, bool)
-            or not isinstance(d_max, numbers.Real) or not math.isfinite(d_max)
-            or not 0 < d_max < left.shape[1]):
+    from .validate import check_pair, check_range
+    try:
+        left, right = check_pair(left, right)
+        check_range(d_max, left.shape[1])
+    except ValueError:
         return {}
     facts = match_direction(left, right, d_max)
     if facts["swapped"]:

@@ -7,7 +7,7 @@ import numpy as np
 
 from .model.init import AUTO, Box, Point
 
-__all__ = ["check_inputs", "check_init", "parse_init"]
+__all__ = ["check_init", "check_inputs", "check_pair", "check_range", "parse_init"]
 
 KINDS = "expected an ellipse (cx, cy, rx, ry), a boolean mask, 'auto', a Point or a Box"
 
@@ -20,24 +20,35 @@ def check_inputs(left, right, d_max, init, init_frame, params):
     """Read and check the solver's inputs; returns ``(left, right, d_max, init)`` with the
     images as float32 ``(H, W, 3)`` in [0, 1] and ``init`` as an ellipse tuple or a boolean
     mask."""
+    left, right = check_pair(left, right)
+    H, W = left.shape[:2]
+    need = _largest_patch(params)
+    if H < need or W < need:
+        raise ValueError(f"left: expected an image at least {need}x{need} pixels (the largest "
+                         f"patch), got {W}x{H}")
+    check_range(d_max, W)
+    if init_frame not in ("left", "cyclopean"):
+        raise ValueError(f"init_frame: expected 'left' or 'cyclopean', got {init_frame!r}")
+    return left, right, float(d_max), check_init(init, (H, W))
+
+
+def check_pair(left, right):
+    """Both images read (:func:`lss_kernels.io.read_image`) and of one size."""
     from .io import read_image
     left = read_image(left, name="left")
     right = read_image(right, name="right")
     if left.shape != right.shape:
         raise ValueError(f"right: expected the size of left ({left.shape[1]}x{left.shape[0]}), "
                          f"got {right.shape[1]}x{right.shape[0]}")
-    H, W = left.shape[:2]
-    need = _largest_patch(params)
-    if H < need or W < need:
-        raise ValueError(f"left: expected an image at least {need}x{need} pixels (the largest "
-                         f"patch), got {W}x{H}")
+    return left, right
+
+
+def check_range(d_max, width):
+    """``d_max`` a finite number of pixels in ``(0, width)``."""
     if isinstance(d_max, bool) or not isinstance(d_max, numbers.Real) or not math.isfinite(d_max):
         raise ValueError(f"d_max: expected a finite number of pixels, got {d_max!r}")
-    if not 0 < d_max < W:
-        raise ValueError(f"d_max: expected 0 < d_max < image width ({W}), got {d_max}")
-    if init_frame not in ("left", "cyclopean"):
-        raise ValueError(f"init_frame: expected 'left' or 'cyclopean', got {init_frame!r}")
-    return left, right, float(d_max), check_init(init, (H, W))
+    if not 0 < d_max < width:
+        raise ValueError(f"d_max: expected 0 < d_max < image width ({width}), got {d_max}")
 
 
 def _describe(value):
