@@ -353,7 +353,10 @@ def test_distinctness_weights_match_the_specification(pair):
         want = ref.distinctness(cost, 0.3)
         got = lanes.to_image(weighted.distinct[level], H, W)
         np.testing.assert_allclose(got, want, atol=1e-4)
-        np.testing.assert_allclose(relays[1][level], relays[0][level] * want, rtol=1e-4,
+        # the relay is scaled by the distinctness the kernel holds (checked just above to
+        # 1e-4 absolute); against ``want`` a relative test fails where the distinctness is
+        # near 0 (on CUDA a relay of 1.4718e-7 against 1.4712e-7: float rounding, not a bug)
+        np.testing.assert_allclose(relays[1][level], relays[0][level] * got, rtol=1e-5,
                                    atol=1e-12)
         assert 0 < (want < 1).mean() < 1
     pool.destroy()
