@@ -166,3 +166,21 @@ def test_setup_time_runs_first_known_new_and_new_bucket_sizes_on_a_fresh_cache_e
     assert lines[-1] == "| **a new size bucket adds** | **5.0** |"
     with pytest.raises(argparse.ArgumentTypeError, match="WIDTHxHEIGHT"):
         st.parse_size("320")
+
+
+def test_scene_times_solves_a_scene_three_times_with_the_same_answer(tmp_path, fresh_taichi):
+    """``demos/scene_times.py``: the reset solver's last run is the first run's answer (the
+    CPU is deterministic), timed apart, and the table holds the row and the medians."""
+    from lss_kernels.scenes import write_scene
+    st = _demo("scene_times")
+    write_scene(tmp_path / "a", "tiny", seed=1)
+    row = st.time_scene(tmp_path / "a", fresh_taichi)
+    assert row["scene"] == "a" and row["size"] == "64x48"
+    assert row["f1"] == row["f1_first"] > 0.5
+    assert row["first"] > 0 and row["again"] > 0 and row["iterations"] > 0
+    assert 0 < row["ms_per_iteration"] * row["iterations"] / 1e3 < row["again"]
+    lines = st.table([row], "cpu", "2 CPU cores").splitlines()
+    assert lines[0].startswith("Seconds per scene on cpu (2 CPU cores)")
+    assert lines[4].startswith("| a | 64x48 | ")
+    assert lines[-1].startswith(f"| **median** | | {row['first']:.2f} | {row['again']:.2f} | "
+                                f"{row['iterations']} |")
