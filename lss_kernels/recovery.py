@@ -46,13 +46,17 @@ uses ``PERIODIC`` -- ``RECOVERY`` without the refinement, whose residuals need d
 matches (on the stress scenes with stripes on both layers it raised bad-4.0 from 34 to 61 %)
 -- and the retry, if its model collapses, the given parameters.
 """
+import contextlib
+import warnings
+
 import numpy as np
 
 from .model.init import InitError
 
 __all__ = ["MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE", "MIN_JUMP", "PERIODIC",
-           "PERIODIC_AREA", "RECOVERY", "SwappedViewsWarning", "collapse", "layer_offsets",
-           "model_health", "periodic_fraction", "periodicity", "with_recovery"]
+           "PERIODIC_AREA", "RECOVERY", "SwappedViewsWarning", "UnreliableStartWarning",
+           "collapse", "layer_offsets", "model_health", "named_warnings", "periodic_fraction",
+           "periodicity", "with_recovery"]
 
 #: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
 MIN_JUMP = 1.0
@@ -177,11 +181,39 @@ class SwappedViewsWarning(UserWarning):
     """The pair's matches run the other way: the right image was probably passed first."""
 
 
+class UnreliableStartWarning(UserWarning):
+    """``init="auto"`` found its start on a periodic left image, whose first consensus the
+    stripes make ambiguous: the start, and so the answer, may be the wrong region
+    (:mod:`lss_kernels.model.init`)."""
+
+
+@contextlib.contextmanager
+def named_warnings(name: str):
+    """Inside, the library's own warnings (:class:`SwappedViewsWarning`,
+    :class:`UnreliableStartWarning`) are held and given again on leaving, as
+    ``"<name>: <message>"``, so that a line of ``lss eval`` or ``lss batch`` says which pair
+    it is about; other warnings are shown as they were."""
+    ours, held = (SwappedViewsWarning, UnreliableStartWarning), []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            for category in ours:
+                warnings.simplefilter("always", category)
+            try:
+                yield
+            finally:
+                held = list(caught)
+    finally:                            # also when the solve fails: the warning may say why
+        for w in held:
+            if issubclass(w.category, ours):
+                warnings.warn(w.category(f"{name}: {w.message}"), stacklevel=3)
+            else:
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+
+
 def _check_direction(left, right, d_max) -> dict:
     """:func:`~lss_kernels.direction.match_direction` of the pair (``left`` already read);
     warns when swapped.  An invalid pair or range is left to the solver's own checks (no
     verdict: ``{}``)."""
-    import warnings
     from .direction import match_direction
     from .validate import check_pair, check_range
     try:
@@ -245,7 +277,11 @@ def with_recovery(run, params, d_max, left=None, right=None):
     changed = {k: v for k, v in vars(second_params).items() if getattr(first_params, k) != v}
     record.update(retried=True, retry_params=changed)
     try:
-        second_result, second_extra = run(second_params)
+        with warnings.catch_warnings():
+            # a start found automatically again, on the same left image: its warning
+            # would repeat the first solve's
+            warnings.simplefilter("ignore", UnreliableStartWarning)
+            second_result, second_extra = run(second_params)
     except InitError as error:         # e.g. auto finds no object in the census consensus
         record.update(retry_error=str(error), kept="first")
         result.recovery = record

@@ -104,3 +104,38 @@ def test_lss_solve_prints_the_warning_and_records_it(ti_arch, tmp_path, capsys):
     assert "lss solve: warning: the views look swapped" in err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["recovery"]["direction"]["swapped"] is True
+
+
+def test_named_warnings_give_the_library_warnings_again_with_the_name_also_on_failure():
+    from lss_kernels.recovery import UnreliableStartWarning, named_warnings
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with named_warnings("scene_a"):
+            warnings.warn(SwappedViewsWarning("the views look swapped"))
+            warnings.warn(UserWarning("another library's"))
+            warnings.warn(UnreliableStartWarning("init auto: periodic"))
+            assert caught == []                     # held until the end
+        with pytest.raises(RuntimeError, match="solve failed"):
+            with named_warnings("scene_b"):
+                warnings.warn(SwappedViewsWarning("the views look swapped"))
+                raise RuntimeError("solve failed")
+    got = [(w.category, str(w.message)) for w in caught]
+    assert got == [(SwappedViewsWarning, "scene_a: the views look swapped"),
+                   (UserWarning, "another library's"),
+                   (UnreliableStartWarning, "scene_a: init auto: periodic"),
+                   (SwappedViewsWarning, "scene_b: the views look swapped")]
+
+
+def test_lss_eval_names_the_scene_whose_views_look_swapped(ti_arch, tmp_path, capsys):
+    from lss_kernels.apps.cli import main
+    from lss_kernels.scenes import write_scene
+    scene = write_scene(tmp_path / "data" / "mirror", "tiny", name="mirror")
+    # the views swapped: a sound scene folder whose matches run the other way
+    iio.imwrite(tmp_path / "data" / "mirror" / "left.png",
+                (scene.right * 255).astype(np.uint8))
+    iio.imwrite(tmp_path / "data" / "mirror" / "right.png",
+                (scene.left * 255).astype(np.uint8))
+    assert main(["eval", str(tmp_path / "data"), "--methods", "lss", "--out",
+                 str(tmp_path / "out"), "--arch", ti_arch, "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "lss eval: warning: mirror: the views look swapped" in err

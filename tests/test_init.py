@@ -3,6 +3,7 @@ numpy specification, each kind on rendered scenes with exact ground truth, and b
 import json
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -179,6 +180,42 @@ def test_each_kind_finds_the_rendered_object(easy, kind):
     assert _iou(result.foreground, scene.fg_left) >= 0.9
 
 
+def test_auto_on_a_textured_scene_records_no_periodicity_and_does_not_warn(easy):
+    from lss_kernels.recovery import UnreliableStartWarning
+    scene, solver = easy
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UnreliableStartWarning)
+        solver.reset(scene.left, scene.right, scene.d_max, "auto")
+    assert solver.init_info["periodic"] == 0.0 and "warning" not in solver.init_info
+
+
+def test_auto_on_a_striped_background_warns_that_its_start_may_be_wrong(fresh_taichi):
+    """The stripes leave the first consensus ambiguous (stress scene ``periodic_bg_p6``:
+    auto's start covers a sliver of the object): auto goes on, says so and records it."""
+    from lss_kernels.recovery import PERIODIC_AREA, UnreliableStartWarning
+    from lss_kernels.scenes import make_scene
+    from lss_kernels.solver import Params, Solver
+    scene = make_scene("easy", seed=1, texture_bg={"kind": "stripes", "period": 6.0})
+    with pytest.warns(UnreliableStartWarning, match=r"^init auto: the left image is "
+                      r"periodic \(\d+% of its tiles\).*start from a point, a box or an "
+                      r"ellipse$"):
+        solver = Solver(scene.left, scene.right, scene.d_max, "auto",
+                        params=Params(max_iterations=1))
+    info = solver.init_info
+    solver.close()
+    assert info["kind"] == "auto" and info["periodic"] >= PERIODIC_AREA
+    assert info["warning"].startswith("init auto: the left image is periodic")
+    # a box on the same pair starts from its ellipse and does not warn
+    ys, xs = np.nonzero(scene.fg_left)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UnreliableStartWarning)
+        solver = Solver(scene.left, scene.right, scene.d_max,
+                        Box(xs.min(), ys.min(), xs.max() + 1, ys.max() + 1),
+                        params=Params(max_iterations=1))
+    assert solver.init_info["from"] == "the inscribed ellipse"
+    solver.close()
+
+
 @pytest.fixture(scope="module")
 def slanted(ti_arch):
     from lss_kernels.scenes import make_scene
@@ -261,6 +298,22 @@ def test_cli_without_init_uses_auto_and_reports_it(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["init"]["kind"] == "auto" and summary["init"]["candidates"] >= 1
     assert "rule" in summary["init"] and summary["init"]["seconds"] > 0
+
+
+def test_cli_auto_on_a_striped_background_prints_the_warning_and_records_it(tmp_path):
+    from lss_kernels.scenes import make_scene
+    scene = make_scene("easy", seed=1, texture_bg={"kind": "stripes", "period": 6.0})
+    proc, out = _solve_cli(tmp_path, scene.left, scene.right, "--dmax", str(scene.d_max),
+                           "--max-iterations", "20")
+    assert proc.returncode == 0, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if "init auto" in line]
+    assert len(lines) == 1 and lines[0].startswith("lss solve: warning: init auto: the left "
+                                                   "image is periodic")
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["init"]["warning"] == lines[0][len("lss solve: warning: "):]
+    # the periodic solve collapsed after 20 iterations and was solved again, from a start
+    # found again on the same image: still one line
+    assert summary["recovery"]["retried"]
 
 
 def test_eval_with_init_from_the_true_box(tmp_path, fresh_taichi):

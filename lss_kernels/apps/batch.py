@@ -263,11 +263,13 @@ def _replace_folder(new: Path, final: Path, trash: Path) -> None:
 
 def _solve_pair(pair: Pair, out: str, params, arch: str, threads_by_host: dict) -> dict:
     """Solve ``pair`` into ``out/<name>`` through a partial folder; returns its summary."""
+    from ..recovery import named_warnings
     from .jobs import run_job
     cache = _worker_cache(arch, threads_here(threads_by_host))
     partial = Path(tempfile.mkdtemp(prefix=f".{pair.name}{PARTIAL}", dir=out))
     try:
-        summary = run_job(pair.job(), partial / "result", params, cache=cache)
+        with named_warnings(pair.name):
+            summary = run_job(pair.job(), partial / "result", params, cache=cache)
         _replace_folder(partial / "result", Path(out) / pair.name, partial / "previous")
     finally:
         shutil.rmtree(partial, ignore_errors=True)

@@ -200,10 +200,11 @@ def main(argv=None):
         parser.print_help()
         return 2
     try:
-        from ..recovery import SwappedViewsWarning
+        from ..recovery import SwappedViewsWarning, UnreliableStartWarning
         with warnings.catch_warnings():
-            # warnings as one line each; swapped views every time (each pair of lss batch)
+            # warnings as one line each; the library's own every time (each pair of a batch)
             warnings.simplefilter("always", SwappedViewsWarning)
+            warnings.simplefilter("always", UnreliableStartWarning)
             warnings.showwarning = lambda message, *_, **__: print(
                 f"lss {args.command}: warning: {message}", file=sys.stderr)
             return int(args.func(args) or 0)

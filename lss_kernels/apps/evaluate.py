@@ -144,14 +144,15 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
     seconds spent on the trace."""
     if method == "lss":
         from ..model.init import InitError
-        from ..recovery import with_recovery
+        from ..recovery import named_warnings, with_recovery
 
         def run(p):
             result, rows, spent = _solve(scene, p, trace, init)
             return result, (rows, spent)
         try:
-            result, (rows, spent) = with_recovery(run, params, scene.d_max, scene.left,
-                                                  scene.right)
+            with named_warnings(scene.name):
+                result, (rows, spent) = with_recovery(run, params, scene.d_max, scene.left,
+                                                      scene.right)
         except InitError as error:
             # no start found (auto, a point): the scene scores as no answer, the run goes on
             unknown = np.full(scene.left.shape[:2], np.inf, np.float32)

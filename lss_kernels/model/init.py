@@ -36,7 +36,8 @@ and removes stray matches.  Then:
   centroid's distance from the image centre, as a fraction of the half-diagonal) is the
   object: the largest near region closest to the centre.  It then takes back the near
   pixels within ``REGROW`` of it: an object large enough to pull the fit up loses its rim
-  to the fit.
+  to the fit.  On a periodic left image (the test above) ``auto`` has no ellipse to fall
+  back on: it goes on and warns :class:`~lss_kernels.recovery.UnreliableStartWarning`.
 
 A found region starts phi widened by ``SPILL`` pixels: a start that spills over the object is
 recovered by the evolution, one that covers only part of it is not always (paper15 scene 4:
@@ -342,7 +343,27 @@ class InitialRegion:
             return self._box(init, left)
         mask = self._point(init) if isinstance(init, Point) else self._auto()
         self.info["area"] = int(mask.sum())
+        if init == AUTO and left is not None:
+            self._check_periodic(left)
         return mask, "cyclopean"
+
+    def _check_periodic(self, left):
+        """Record the left image's periodic fraction in :attr:`info`; on a periodic image
+        (the test that picks the recovery's periodic parameters, and a box's ellipse), warn
+        :class:`~lss_kernels.recovery.UnreliableStartWarning`.  On the seed-0 stress scenes ``auto`` then fails on
+        one of the four striped pairs (``periodic_bg_p6``: the stripes have no confident
+        match, and the object's d-bar is 3-5 px off)."""
+        import warnings
+        from ..recovery import PERIODIC_AREA, UnreliableStartWarning, periodic_fraction
+        periodic = periodic_fraction(left)
+        self.info["periodic"] = periodic
+        if periodic >= PERIODIC_AREA:
+            self.info["warning"] = (
+                f"init auto: the left image is periodic ({periodic:.0%} of its tiles), so "
+                f"the first consensus that the start is found from is ambiguous and the "
+                f"start may be the wrong region; check overlay.png, or start from a point, "
+                f"a box or an ellipse")
+            warnings.warn(UnreliableStartWarning(self.info["warning"]), stacklevel=4)
 
     def _box(self, box, left=None):
         """The region of the point at the box's centre, cut to the box; else its ellipse."""
