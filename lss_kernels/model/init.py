@@ -350,9 +350,9 @@ class InitialRegion:
     def _check_periodic(self, left):
         """Record the left image's periodic fraction in :attr:`info`; on a periodic image
         (the test that picks the recovery's periodic parameters, and a box's ellipse), warn
-        :class:`~lss_kernels.recovery.UnreliableStartWarning`.  On the seed-0 stress scenes ``auto`` then fails on
-        one of the four striped pairs (``periodic_bg_p6``: the stripes have no confident
-        match, and the object's d-bar is 3-5 px off)."""
+        :class:`~lss_kernels.recovery.UnreliableStartWarning`.  On the striped stress scenes
+        of seeds 0 and 2 ``auto`` fails on 3 of 8 (``periodic_bg_p6``, seed 0: the stripes
+        have no confident match, and the object's d-bar is 3-5 px off)."""
         import warnings
         from ..recovery import PERIODIC_AREA, UnreliableStartWarning, periodic_fraction
         periodic = periodic_fraction(left)
