@@ -1,4 +1,5 @@
-"""Which way a pair's matches run: a check for swapped views before the solve.
+"""Which way and how far a pair's matches run: checks for swapped views and for a search range
+that is too short, before the solve.
 
 The model reads the pair in the Middlebury convention: the left image is the reference and a
 left pixel ``x`` matches the right pixel ``x - d`` with ``d >= 0``.  Passed the other way
@@ -18,6 +19,13 @@ as the stated one.  A pair with no parallax (identical views, a distant scene) o
 periodic texture matches both ways alike and is not flagged; nor is a pair with too little
 texture to tell (fewer than ``MIN_TEXTURED`` pixels).
 
+A search range shorter than the scene's disparities is the other silent failure: the
+nearer surface has no match inside ``[0, d_max]``, and the foreground vanishes or lies.
+:func:`match_range` compares, in the stated direction, each textured pixel's best cost within
+the range (``s = 0 .. d``) with its best just beyond it (``d < s <= 2 d``); the range looks
+too short when the beyond wins at least ``SHORT_SHARE`` of the textured pixels (about the
+share of them whose disparity the range misses).
+
 Measured on paper15 and the stress scenes (``python -m lss_kernels.stress``, seeds 0 and 2):
 see ``docs/design.md``.
 """
@@ -25,7 +33,8 @@ import math
 
 import numpy as np
 
-__all__ = ["MARGIN", "SWAPPED_RATIO", "SWAPPED_SHARE", "match_direction"]
+__all__ = ["MARGIN", "SHORT_SHARE", "SWAPPED_RATIO", "SWAPPED_SHARE", "match_direction",
+           "match_range"]
 
 MAX_WIDTH = 320        # the check's image width at most, pixels (block averages)
 WINDOW = 5             # side of the square that sums absolute differences, pixels
@@ -34,6 +43,7 @@ MARGIN = 0.8           # a direction wins a pixel where its cost is below MARGIN
 SWAPPED_SHARE = 0.5    # swapped: the reversed direction wins this share of textured pixels
 SWAPPED_RATIO = 3.0    # ... and this many times as many as the stated one
 MIN_TEXTURED = 200     # fewer textured pixels: no verdict
+SHORT_SHARE = 0.1      # range too short: matches beyond it win this share of textured pixels
 
 
 def _box(a, k):
@@ -82,4 +92,37 @@ def match_direction(left, right, d_max) -> dict:
     reverse = float((textured & (best[1] < MARGIN * best[0])).sum()) / n
     facts.update(stated=stated, reversed=reverse,
                  swapped=reverse >= SWAPPED_SHARE and reverse >= SWAPPED_RATIO * stated)
+    return facts
+
+
+def match_range(left, right, d_max) -> dict:
+    """Whether the pair's matches lie inside the searched range ``[0, d_max]``.
+
+    Arguments as for :func:`match_direction`.  Returns ``beyond`` (the share of textured
+    pixels whose best cost at shifts ``d_max < s <= 2 d_max`` is below ``MARGIN`` times their
+    best within the range), ``textured``, ``scale`` and ``short`` (bool); ``short`` is False
+    without a verdict (an image too narrow for the shifts, or too little texture)."""
+    f = max(1, math.ceil(np.shape(left)[1] / MAX_WIDTH))
+    gl, gr = _grey(left, f), _grey(right, f)
+    H, W = gl.shape
+    D = max(1, math.ceil(float(d_max) / f))
+    E = min(2 * D, W - 2 * WINDOW)             # the farthest shift read; columns E .. W - 1
+    facts = {"scale": f, "textured": 0, "beyond": 0.0, "short": False}
+    if E <= D or H < WINDOW:
+        return facts
+
+    def best(shifts):
+        cost = np.full((H - WINDOW + 1, W - E - WINDOW + 1), np.inf)
+        for s in shifts:
+            cost = np.minimum(cost, _box(np.abs(gl[:, E:] - gr[:, E - s:W - s]), WINDOW))
+        return cost
+    within, beyond = best(range(0, D + 1)), best(range(D + 1, E + 1))
+    gradient = np.abs(np.diff(gl[:, E:], axis=1, append=gl[:, -1:]))
+    textured = _box(gradient, WINDOW) > TEXTURE * WINDOW * WINDOW
+    n = int(textured.sum())
+    facts["textured"] = n
+    if n < MIN_TEXTURED:
+        return facts
+    share = float((textured & (beyond < MARGIN * within)).sum()) / n
+    facts.update(beyond=share, short=share >= SHORT_SHARE)
     return facts

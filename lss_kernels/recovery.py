@@ -54,9 +54,9 @@ import numpy as np
 from .model.init import InitError
 
 __all__ = ["MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE", "MIN_JUMP", "PERIODIC",
-           "PERIODIC_AREA", "RECOVERY", "SwappedViewsWarning", "UnreliableStartWarning",
-           "collapse", "layer_offsets", "model_health", "named_warnings", "periodic_fraction",
-           "periodicity", "with_recovery"]
+           "PERIODIC_AREA", "RECOVERY", "ShortRangeWarning", "SwappedViewsWarning",
+           "UnreliableStartWarning", "WARNINGS", "collapse", "layer_offsets", "model_health",
+           "named_warnings", "periodic_fraction", "periodicity", "with_recovery"]
 
 #: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
 MIN_JUMP = 1.0
@@ -181,19 +181,27 @@ class SwappedViewsWarning(UserWarning):
     """The pair's matches run the other way: the right image was probably passed first."""
 
 
+class ShortRangeWarning(UserWarning):
+    """Many of the pair's matches lie beyond the searched range: ``d_max`` is too small."""
+
+
 class UnreliableStartWarning(UserWarning):
     """``init="auto"`` found its start on a periodic left image, whose first consensus the
     stripes make ambiguous: the start, and so the answer, may be the wrong region
     (:mod:`lss_kernels.model.init`)."""
 
 
+#: The library's own warnings, which the commands show every time.
+WARNINGS = (SwappedViewsWarning, ShortRangeWarning, UnreliableStartWarning)
+
+
 @contextlib.contextmanager
 def named_warnings(name: str):
-    """Inside, the library's own warnings (:class:`SwappedViewsWarning`,
-    :class:`UnreliableStartWarning`) are held and given again on leaving, as
+    """Inside, the library's own warnings (:data:`WARNINGS`) are held and given again on
+    leaving, as
     ``"<name>: <message>"``, so that a line of ``lss eval`` or ``lss batch`` says which pair
     it is about; other warnings are shown as they were."""
-    ours, held = (SwappedViewsWarning, UnreliableStartWarning), []
+    ours, held = WARNINGS, []
     try:
         with warnings.catch_warnings(record=True) as caught:
             for category in ours:
@@ -210,25 +218,33 @@ def named_warnings(name: str):
                 warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
 
-def _check_direction(left, right, d_max) -> dict:
-    """:func:`~lss_kernels.direction.match_direction` of the pair (``left`` already read);
-    warns when swapped.  An invalid pair or range is left to the solver's own checks (no
-    verdict: ``{}``)."""
-    from .direction import match_direction
+def _check_matches(left, right, d_max) -> tuple:
+    """:func:`~lss_kernels.direction.match_direction` and, unless swapped,
+    :func:`~lss_kernels.direction.match_range` of the pair (``left`` already read); warns
+    when swapped or when the range looks too short.  An invalid pair or range is left to the
+    solver's own checks (no verdict: ``({}, {})``)."""
+    from .direction import match_direction, match_range
     from .validate import check_pair, check_range
     try:
         left, right = check_pair(left, right)
         check_range(d_max, left.shape[1])
     except ValueError:
-        return {}
-    facts = match_direction(left, right, d_max)
-    if facts["swapped"]:
+        return {}, {}
+    direction = match_direction(left, right, d_max)
+    if direction["swapped"]:
         warnings.warn(SwappedViewsWarning(
             f"the views look swapped: the right image matches the left one at x + d on "
-            f"{facts['reversed']:.0%} of its textured pixels and at x - d on "
-            f"{facts['stated']:.0%}; the left image must be the reference (x_right = "
+            f"{direction['reversed']:.0%} of its textured pixels and at x - d on "
+            f"{direction['stated']:.0%}; the left image must be the reference (x_right = "
             f"x_left - d, d >= 0): pass the two images the other way round"), stacklevel=3)
-    return facts
+        return direction, {}
+    reach = match_range(left, right, d_max)
+    if reach["short"]:
+        warnings.warn(ShortRangeWarning(
+            f"the search range looks too short: {reach['beyond']:.0%} of the textured pixels "
+            f"match better at a disparity between d_max = {float(d_max):g} and twice it than "
+            f"within [0, d_max]; give a larger d_max (--dmax)"), stacklevel=3)
+    return direction, reach
 
 
 def with_recovery(run, params, d_max, left=None, right=None):
@@ -241,16 +257,16 @@ def with_recovery(run, params, d_max, left=None, right=None):
     changed by ``PERIODIC`` and the second ``params`` (at once, without a retry, when the
     first finds no initial region: :class:`~lss_kernels.model.init.InitError`).  ``params``
     None: the defaults; ``d_max``: the searched range (left-view pixels).  With ``left``
-    and ``right``, the pair is first checked for swapped views
-    (:func:`lss_kernels.direction.match_direction`, recorded as ``direction``): a
-    :class:`SwappedViewsWarning` says so before the solve."""
+    and ``right``, the pair is first checked for swapped views and a search range that
+    is too short (:mod:`lss_kernels.direction`, recorded as ``direction`` and ``range``): a
+    :class:`SwappedViewsWarning` or a :class:`ShortRangeWarning` says so before the solve."""
     from .params import Params
     params = Params() if params is None else params
     from .io import read_image
     record = {}
     left = read_image(left, name="left") if left is not None else None
     if left is not None and right is not None:
-        record["direction"] = _check_direction(left, right, d_max)
+        record["direction"], record["range"] = _check_matches(left, right, d_max)
     first_params, second_params = params, params.replace(**RECOVERY)
     if params.recover and left is not None and second_params != params:
         fraction = periodic_fraction(left)

@@ -86,8 +86,48 @@ def test_with_recovery_warns_before_the_solve_and_records_the_check():
         warnings.simplefilter("error", SwappedViewsWarning)
         result, _ = with_recovery(solve_sound, Params(), 10.0, left, right)
     assert result.recovery["direction"]["swapped"] is False
+    assert result.recovery["range"]["short"] is False
     result, _ = with_recovery(solve_sound, Params(), 10.0, left)   # no right image: no check
-    assert "direction" not in result.recovery
+    assert "direction" not in result.recovery and "range" not in result.recovery
+    # swapped: the range of the stated direction says nothing, and is not checked
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SwappedViewsWarning)
+        result, _ = with_recovery(solve_sound, Params(), 10.0, right, left)
+    assert result.recovery["range"] == {}
+
+
+def test_a_range_shorter_than_the_shift_is_short_and_a_longer_one_is_not():
+    left, right = shifted_pair(shift=12)
+    short = direction.match_range(left, right, 6)
+    assert short["short"] and short["beyond"] > 0.9
+    enough = direction.match_range(left, right, 16)
+    assert not enough["short"] and enough["beyond"] < 0.05
+    # beyond twice the range nothing is looked at: no verdict of shortness
+    assert not direction.match_range(left, right, 4)["short"]
+    # no texture: no verdict
+    flat = direction.match_range(np.full((40, 96), 0.5), np.full((40, 96), 0.5), 6)
+    assert flat["textured"] == 0 and not flat["short"]
+
+
+def test_the_rendered_scene_with_a_short_range_warns_before_the_solve():
+    from lss_kernels.recovery import ShortRangeWarning
+    scene = make_scene("easy", seed=1)                  # foreground at 24 px, d_max 26
+    warned_before = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+
+        def run(params):
+            warned_before.append(len(caught))
+            return sound_model(), None
+        result, _ = with_recovery(run, Params(), 14.0, scene.left, scene.right)
+    assert warned_before == [1] and issubclass(caught[0].category, ShortRangeWarning)
+    assert str(caught[0].message).startswith("the search range looks too short: ")
+    assert str(caught[0].message).endswith("give a larger d_max (--dmax)")
+    assert result.recovery["range"]["short"] and result.recovery["range"]["beyond"] > 0.2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ShortRangeWarning)
+        result, _ = with_recovery(run, Params(), scene.d_max, scene.left, scene.right)
+    assert not result.recovery["range"]["short"]
 
 
 def test_lss_solve_prints_the_warning_and_records_it(ti_arch, tmp_path, capsys):
@@ -104,6 +144,14 @@ def test_lss_solve_prints_the_warning_and_records_it(ti_arch, tmp_path, capsys):
     assert "lss solve: warning: the views look swapped" in err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["recovery"]["direction"]["swapped"] is True
+    # the views as given, with a range shorter than the foreground's 12 px
+    assert main(["solve", str(tmp_path / "left.png"), str(tmp_path / "right.png"), "--dmax",
+                 "8", "--init", "ellipse:32,24,10,8", "--out", str(out), "--arch", ti_arch,
+                 "--quiet", "--param", "max_iterations=3", "--param", "recover=False"]) == 0
+    err = capsys.readouterr().err
+    assert "lss solve: warning: the search range looks too short" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["recovery"]["range"]["short"] is True
 
 
 def test_named_warnings_give_the_library_warnings_again_with_the_name_also_on_failure():

@@ -200,11 +200,11 @@ def main(argv=None):
         parser.print_help()
         return 2
     try:
-        from ..recovery import SwappedViewsWarning, UnreliableStartWarning
+        from ..recovery import WARNINGS
         with warnings.catch_warnings():
             # warnings as one line each; the library's own every time (each pair of a batch)
-            warnings.simplefilter("always", SwappedViewsWarning)
-            warnings.simplefilter("always", UnreliableStartWarning)
+            for category in WARNINGS:
+                warnings.simplefilter("always", category)
             warnings.showwarning = lambda message, *_, **__: print(
                 f"lss {args.command}: warning: {message}", file=sys.stderr)
             return int(args.func(args) or 0)
