@@ -2,12 +2,14 @@
 was given, so that bad input never reaches a kernel."""
 import math
 import numbers
+import os
 
 import numpy as np
 
 from .model.init import AUTO, Box, Point
 
-__all__ = ["check_init", "check_inputs", "check_pair", "check_range", "parse_init"]
+__all__ = ["available_memory", "check_init", "check_inputs", "check_memory", "check_pair",
+           "check_range", "fields_bytes", "parse_init"]
 
 KINDS = "expected an ellipse (cx, cy, rx, ry), a boolean mask, 'auto', a Point or a Box"
 
@@ -27,6 +29,7 @@ def check_inputs(left, right, d_max, init, init_frame, params):
         raise ValueError(f"left: expected an image at least {need}x{need} pixels (the largest "
                          f"patch), got {W}x{H}")
     check_range(d_max, W)
+    check_memory(H, W, d_max)
     if init_frame not in ("left", "cyclopean"):
         raise ValueError(f"init_frame: expected 'left' or 'cyclopean', got {init_frame!r}")
     return left, right, float(d_max), check_init(init, (H, W))
@@ -49,6 +52,48 @@ def check_range(d_max, width):
         raise ValueError(f"d_max: expected a finite number of pixels, got {d_max!r}")
     if not 0 < d_max < width:
         raise ValueError(f"d_max: expected 0 < d_max < image width ({width}), got {d_max}")
+
+
+def fields_bytes(height, width, d_max) -> int:
+    """About the bytes of a solver's fields for a ``width x height`` pair searched to
+    ``d_max`` (the default parameters; a little under what they hold): per pixel of the size
+    bucket, 640 bytes of planes and 16 bytes for each of the ``c_max`` candidates of the
+    volumes (measured: 667 + 16.4 c_max)."""
+    from .kernels.backend import bucket_shape
+    from .params import c_max
+    bucket_h, bucket_w = bucket_shape(int(height), int(width))
+    return bucket_h * bucket_w * (640 + 16 * c_max(d_max))
+
+
+def available_memory():
+    """Bytes of memory this machine can still give a process (``MemAvailable`` on Linux, the
+    free pages elsewhere), or None where neither can be read."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_memory(height, width, d_max):
+    """On the CPU, a pair whose solver's fields (:func:`fields_bytes`) would not fit in the
+    memory available is refused before any is allocated (instead of the process being
+    killed part-way)."""
+    from .kernels.backend import current_arch
+    if current_arch() not in (None, "cpu"):
+        return
+    need, have = fields_bytes(height, width, d_max), available_memory()
+    if have is not None and need > have:
+        raise ValueError(f"left: a {width}x{height} pair searched to d_max {d_max:g} needs about "
+                         f"{need / 2**30:.1f} GiB for the solver's fields and this machine has "
+                         f"{have / 2**30:.1f} GiB available; expected a smaller pair: "
+                         f"downscale both images and d_max by one factor, or crop them")
 
 
 def _describe(value):

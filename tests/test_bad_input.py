@@ -331,6 +331,34 @@ def test_solver_validates_before_allocating(ti_arch):
         Solver(a, b, 64, (32, 24, 10, 8))
 
 
+def test_fields_bytes_is_a_little_under_what_a_solver_holds(ti_arch):
+    from lss_kernels.scenes import make_scene
+    from lss_kernels.validate import fields_bytes
+    for preset in ("tiny", "easy"):
+        scene = make_scene(preset)
+        solver = Solver(scene.left, scene.right, scene.d_max, tuple(scene.init_ellipse),
+                        params=Params(max_iterations=1))
+        held = solver.memory_bytes
+        solver.close()
+        assert 0.8 * held < fields_bytes(*scene.left.shape[:2], scene.d_max) <= held
+
+
+def test_a_pair_too_large_for_the_memory_is_refused_before_allocating(ti_arch, monkeypatch):
+    from lss_kernels import validate
+    a, b = _pair()
+    monkeypatch.setattr(validate, "available_memory", lambda: 2**20)
+    with pytest.raises(ValueError, match=r"^left: a 64x48 pair searched to d_max 12 needs about "
+                                         r"0\.0 GiB for the solver's fields and this machine has "
+                                         r"0\.0 GiB available; expected a smaller pair: "
+                                         r"downscale both images and d_max by one factor, or "
+                                         r"crop them$"):
+        Solver(a, b, 12, (32, 24, 10, 8))
+    monkeypatch.setattr(validate, "available_memory", lambda: None)   # unknown: no check
+    solver = Solver(a, b, 12, (32, 24, 10, 8), params=Params(max_iterations=2))
+    assert solver.run().iterations == 2
+    solver.close()
+
+
 def test_unknown_arch(ti_arch):
     a, b = _pair()
     with pytest.raises(ValueError, match=r"^arch: expected one of cpu, cuda, .*, got 'tpu'$"):
@@ -443,3 +471,13 @@ def test_cli_failure_keeps_an_existing_out_untouched(capsys, tmp_path, pair_file
     assert code == 2
     assert "d_max" in capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == ["previous.txt"]
+
+
+def test_cli_pair_too_large_for_the_memory(capsys, tmp_path, pair_files, ti_arch, monkeypatch):
+    from lss_kernels import validate
+    monkeypatch.setattr(validate, "available_memory", lambda: 2**20)
+    left, right = pair_files
+    message = _cli(capsys, tmp_path, [left, right, "--dmax", "12", "--init",
+                                      "ellipse:32,24,10,8"], ti_arch)
+    assert re.match(r"^left: a 64x48 pair searched to d_max 12 needs about .* GiB available; "
+                    r"expected a smaller pair", message)
