@@ -112,7 +112,7 @@ class Solver:
 
     def __init__(self, left, right, d_max, init, params=None, arch=None, init_frame="left",
                  profile=False):
-        from .validate import check_inputs
+        from .validate import check_inputs, check_memory
         t_start = time.perf_counter()
         backend.before_solver(arch)
         self.params = params if params is not None else Params()
@@ -120,10 +120,10 @@ class Solver:
             raise TypeError(f"params: expected lss_kernels.Params, got {type(params).__name__}")
         left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
                                                 self.params)
-        self.H, self.W = left.shape[:2]
-        self.c_max = c_max(d_max)
+        self.H, self.W = H, W = left.shape[:2]
+        self.c_max = C = c_max(d_max)
         self.profile = profile
-        H, W, C = self.H, self.W, self.c_max
+        check_memory(H, W, d_max)       # before the first field: a new solver's allocation
 
         # every field of the solve has the shape of the image's size bucket, and the kernels
         # read H and W from the extent at run time: they compile once per bucket (and range)

@@ -29,7 +29,6 @@ def check_inputs(left, right, d_max, init, init_frame, params):
         raise ValueError(f"left: expected an image at least {need}x{need} pixels (the largest "
                          f"patch), got {W}x{H}")
     check_range(d_max, W)
-    check_memory(H, W, d_max)
     if init_frame not in ("left", "cyclopean"):
         raise ValueError(f"init_frame: expected 'left' or 'cyclopean', got {init_frame!r}")
     return left, right, float(d_max), check_init(init, (H, W))
@@ -84,7 +83,8 @@ def available_memory():
 def check_memory(height, width, d_max):
     """On the CPU, a pair whose solver's fields (:func:`fields_bytes`) would not fit in the
     memory available is refused before any is allocated (instead of the process being
-    killed part-way)."""
+    killed part-way); a new :class:`~lss_kernels.Solver` asks, a reset one (its fields
+    already allocated) does not."""
     from .kernels.backend import current_arch
     if current_arch() not in (None, "cpu"):
         return

@@ -356,6 +356,10 @@ def test_a_pair_too_large_for_the_memory_is_refused_before_allocating(ti_arch, m
     monkeypatch.setattr(validate, "available_memory", lambda: None)   # unknown: no check
     solver = Solver(a, b, 12, (32, 24, 10, 8), params=Params(max_iterations=2))
     assert solver.run().iterations == 2
+    # a reset solver allocates nothing: the memory its own fields take is not asked for again
+    monkeypatch.setattr(validate, "available_memory", lambda: 2**20)
+    solver.reset(a, b, 12, (32, 24, 10, 8))
+    assert solver.run().iterations == 2
     solver.close()
 
 
