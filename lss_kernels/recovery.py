@@ -198,9 +198,8 @@ WARNINGS = (SwappedViewsWarning, ShortRangeWarning, UnreliableStartWarning)
 @contextlib.contextmanager
 def named_warnings(name: str):
     """Inside, the library's own warnings (:data:`WARNINGS`) are held and given again on
-    leaving, as
-    ``"<name>: <message>"``, so that a line of ``lss eval`` or ``lss batch`` says which pair
-    it is about; other warnings are shown as they were."""
+    leaving as ``"<name>: <message>"``, so that a line of ``lss eval`` or ``lss batch`` says
+    which pair it is about; other warnings are shown as they were."""
     ours, held = WARNINGS, []
     try:
         with warnings.catch_warnings(record=True) as caught:
