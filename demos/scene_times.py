@@ -85,11 +85,11 @@ def main(argv=None) -> int:
     parser.add_argument("--scenes", type=int, default=0, help="only the first N scenes")
     parser.add_argument("--out", help="write the table (markdown) here too")
     args = parser.parse_args(argv)
-    folders = sorted(p for p in Path(args.dataset).iterdir() if (p / "meta.json").is_file())
-    if args.scenes:
-        folders = folders[:args.scenes]
-    if not folders:
-        parser.error(f"dataset: no scene folder in {args.dataset}")
+    from lss_kernels import io
+    try:
+        folders = io.list_scenes(args.dataset)[:args.scenes or None]
+    except (FileNotFoundError, ValueError) as error:
+        parser.error(str(error))
     from lss_kernels.kernels import backend
     arch = backend.init(arch=args.arch)
     device = describe(arch)
