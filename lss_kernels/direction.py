@@ -60,6 +60,19 @@ def _grey(image, f):
     return g[:H, :W].reshape(H // f, f, W // f, f).mean(axis=(1, 3))
 
 
+def _greys(left, right):
+    """The check's scale (block size) and the pair's grey copies at it."""
+    f = max(1, math.ceil(np.shape(left)[1] / MAX_WIDTH))
+    return f, _grey(left, f), _grey(right, f)
+
+
+def _textured(g):
+    """The windows of ``g`` whose mean absolute horizontal difference is above ``TEXTURE``
+    (the valid part of :func:`_box`)."""
+    gradient = np.abs(np.diff(g, axis=1, append=g[:, -1:]))
+    return _box(gradient, WINDOW) > TEXTURE * WINDOW * WINDOW
+
+
 def match_direction(left, right, d_max) -> dict:
     """Whether the pair's matches run the stated way (``x_right = x_left - d``).
 
@@ -67,8 +80,7 @@ def match_direction(left, right, d_max) -> dict:
     ``d_max``: the searched range, left-view pixels.  Returns ``stated`` and ``reversed``
     (the share of textured pixels each direction wins), ``textured`` (their count at the
     check's scale), ``scale`` (the block size) and ``swapped`` (bool)."""
-    f = max(1, math.ceil(np.shape(left)[1] / MAX_WIDTH))
-    gl, gr = _grey(left, f), _grey(right, f)
+    f, gl, gr = _greys(left, right)
     H, W = gl.shape
     D = min(max(1, math.ceil(float(d_max) / f)), (W - WINDOW) // 2)
     facts = {"scale": f, "textured": 0, "stated": 0.0, "reversed": 0.0, "swapped": False}
@@ -82,8 +94,7 @@ def match_direction(left, right, d_max) -> dict:
             shifted = gr[:, D + sign * s:W - D + sign * s]
             cost = np.minimum(cost, _box(np.abs(gl[:, cols] - shifted), WINDOW))
         best.append(cost)
-    gradient = np.abs(np.diff(gl[:, cols], axis=1, append=gl[:, cols][:, -1:]))
-    textured = _box(gradient, WINDOW) > TEXTURE * WINDOW * WINDOW
+    textured = _textured(gl[:, cols])
     n = int(textured.sum())
     facts["textured"] = n
     if n < MIN_TEXTURED:
@@ -102,8 +113,7 @@ def match_range(left, right, d_max) -> dict:
     pixels whose best cost at shifts ``d_max < s <= 2 d_max`` is below ``MARGIN`` times their
     best within the range), ``textured``, ``scale`` and ``short`` (bool); ``short`` is False
     without a verdict (an image too narrow for the shifts, or too little texture)."""
-    f = max(1, math.ceil(np.shape(left)[1] / MAX_WIDTH))
-    gl, gr = _grey(left, f), _grey(right, f)
+    f, gl, gr = _greys(left, right)
     H, W = gl.shape
     D = max(1, math.ceil(float(d_max) / f))
     E = min(2 * D, W - 2 * WINDOW)             # the farthest shift read; columns E .. W - 1
@@ -117,8 +127,7 @@ def match_range(left, right, d_max) -> dict:
             cost = np.minimum(cost, _box(np.abs(gl[:, E:] - gr[:, E - s:W - s]), WINDOW))
         return cost
     within, beyond = best(range(0, D + 1)), best(range(D + 1, E + 1))
-    gradient = np.abs(np.diff(gl[:, E:], axis=1, append=gl[:, -1:]))
-    textured = _box(gradient, WINDOW) > TEXTURE * WINDOW * WINDOW
+    textured = _textured(gl[:, E:])
     n = int(textured.sum())
     facts["textured"] = n
     if n < MIN_TEXTURED:
