@@ -22,9 +22,9 @@ def geometry(ti_arch):
     ones.from_numpy(np.ones((H, W), np.float32))
     only = (WeightPlanes(ones, zeros), WeightPlanes(zeros, ones))   # Theta_1's rows, Theta_2's
 
-    def setup(theta1, theta2, fg):
+    def setup(theta1, theta2, fg, offset=0.0):
         """Theta_j as exact planes (fitted from their own values), phi = 0.01 x signed
-        distance of the foreground columns ``fg`` (a boolean over x)."""
+        distance of the foreground columns ``fg`` (a boolean over x), plus ``offset``."""
         y, x = np.mgrid[0:H, 0:W].astype(np.float64)
         for j, th in enumerate((theta1, theta2)):
             target.from_numpy(th(x, y).astype(np.float32))
@@ -32,7 +32,7 @@ def geometry(ti_arch):
         cols = np.arange(W)
         edges = np.flatnonzero(np.diff(fg.astype(int))) + 0.5
         dist = np.min(np.abs(cols[:, None] - edges[None, :]), axis=1)
-        p = 0.01 * np.where(fg, dist, -dist)
+        p = 0.01 * np.where(fg, dist, -dist) + offset
         phi.from_numpy(np.broadcast_to(p, (H, W)).astype(np.float32))
         phi_x.from_numpy(np.broadcast_to(np.gradient(p), (H, W)).astype(np.float32))
         occ.compute(shapes, phi_x, 1)
@@ -114,3 +114,20 @@ def test_left_view_rendering_of_two_fronto_parallel_planes(geometry):
     # as the left-view disparity jump (20 - 8 = 12)
     assert np.flatnonzero(occl).tolist() == list(range(18, 30))
     assert not (occl & fg).any()
+
+
+def test_occluded_strip_is_as_wide_as_a_whole_pixel_jump_whatever_the_rounding(geometry):
+    """Theta_1 = 7.5, Theta_2 = 6 (+1e-4): a jump of 3 left-view pixels.  The foreground's
+    first left pixel (27, at x_c = 19.5) and the right ray of the strip's first pixel (24)
+    meet phi at the same point, so a test of phi there would fall either way with the
+    rounding of Theta_2; the strip must still be 3 pixels, as the rendered jump says."""
+    occ, _, setup = geometry
+    for eps in (0.0, 1e-4, -1e-4):
+        for offset in (5e-7, -5e-7):
+            setup(lambda x, y: 7.5 + 0 * x, lambda x, y: 6 + eps + 0 * x, _fg_band(20, 40),
+                  offset=offset)
+            fg = occ.extent.image(occ.foreground_left)[0].astype(bool)
+            occl = occ.extent.image(occ.occlusion_left)[0].astype(bool)
+            first = np.flatnonzero(fg)[0]
+            assert first == (27 if offset > 0 else 28)
+            assert np.flatnonzero(occl).tolist() == list(range(first - 3, first)), (eps, offset)

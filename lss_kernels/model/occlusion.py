@@ -20,7 +20,11 @@ foreground surface point that projects there, x_c with x_c + Theta_1(x_c) = x, h
 phi(x_c) > 0; otherwise it sees the background at x_c with x_c + Theta_2(x_c) = x.  Its
 disparity is 2 Theta of that layer, and a background pixel is occluded (seen by the left
 camera, hidden from the right) when the right camera, at x - d, sees the foreground (a z-buffer
-with two layers: the foreground is always in front).
+with two layers: the foreground is always in front).  The foreground point it would see lies
+at x_l in the left view, and the left pixel nearest x_l is asked whether it is foreground: so
+the occluded strip is as wide as the rendered jump in whole pixels, and a whole-pixel jump
+does not lose or gain a pixel to float rounding (a 3 px jump on a rendered probe: occlusion
+F1 0.66 -> 0.92).
 """
 import taichi as ti
 
@@ -121,6 +125,15 @@ class OcclusionGeometry:
             xc = x - sign * shapes.value(j, xc, y)
         return xc
 
+    @ti.func
+    def _foreground_at(self, phi: ti.template(), y, xc):
+        """1 where the cyclopean point xc lies on the foreground (phi > 0) inside the frame."""
+        fg = 0
+        if -0.5 <= xc <= ti.cast(self.extent.width(), ti.f32) - 0.5:
+            if self.sample_row(phi, y, xc) > 0:
+                fg = 1
+        return fg
+
     @ti.kernel
     def render_left(self, shapes: ti.template(), phi: ti.template()):
         """Left-view disparity (2 Theta, left-view pixels), foreground and occlusion masks."""
@@ -130,10 +143,7 @@ class OcclusionGeometry:
                 xf = ti.cast(x, ti.f32)
                 yf = ti.cast(y, ti.f32)
                 xc = self._source(shapes, 0, xf, yf, 1.0)
-                fg = 0
-                if -0.5 <= xc <= width - 0.5:
-                    if self.sample_row(phi, y, xc) > 0:
-                        fg = 1
+                fg = self._foreground_at(phi, y, xc)
                 occ = 0
                 d = 0.0
                 if fg == 1:
@@ -141,12 +151,15 @@ class OcclusionGeometry:
                 else:
                     xb = self._source(shapes, 1, xf, yf, 1.0)
                     d = 2.0 * shapes.value(1, xb, yf)
-                    # the right camera sees x - d: is that the foreground?
-                    xr = xf - d
-                    xcr = self._source(shapes, 0, xr, yf, -1.0)
-                    if -0.5 <= xcr <= width - 0.5:
-                        if self.sample_row(phi, y, xcr) > 0:
-                            occ = 1
+                    # the right camera sees x - d: is the foreground there?  Its point lies
+                    # at xl in the left view; ask the left pixel nearest to it, so that the
+                    # occluded strip is exactly as wide as the rendered jump (x - d and the
+                    # foreground's first pixel coincide for whole-pixel jumps, where asking
+                    # phi at that point would leave the strip to float rounding).
+                    xcr = self._source(shapes, 0, xf - d, yf, -1.0)
+                    xl = ti.round(xcr + shapes.value(0, xcr, yf))
+                    if 0.0 <= xl <= width - 1.0:
+                        occ = self._foreground_at(phi, y, self._source(shapes, 0, xl, yf, 1.0))
                 self.disparity_left[y, x] = ti.max(d, 0.0)
                 self.foreground_left[y, x] = fg
                 self.occlusion_left[y, x] = occ
