@@ -109,6 +109,17 @@ def test_a_range_shorter_than_the_shift_is_short_and_a_longer_one_is_not():
     assert flat["textured"] == 0 and not flat["short"]
 
 
+def test_a_gain_between_the_views_does_not_look_like_a_short_range():
+    """A right camera 15 % brighter or darker (exposure) raises every true match's cost; the
+    rendered scene's shifts beyond the range then matched the brightness better on 15-22 %
+    of its textured pixels, a false alarm.  Counted only where they win on the window's
+    detail too, they do not."""
+    scene = make_scene("easy")                 # foreground at 24 px, d_max 26
+    for gain in (0.85, 1.15):
+        enough = direction.match_range(scene.left, scene.right * gain, scene.d_max)
+        assert not enough["short"] and enough["beyond"] < 0.02, gain
+
+
 def test_the_rendered_scene_with_a_short_range_warns_before_the_solve():
     from lss_kernels.recovery import ShortRangeWarning
     scene = make_scene("easy", seed=1)                  # foreground at 24 px, d_max 26
