@@ -34,14 +34,30 @@ def check_inputs(left, right, d_max, init, init_frame, params):
     return left, right, float(d_max), check_init(init, (H, W))
 
 
+#: Rec. 601 luma weights of R, G, B (what OpenCV and Pillow use to make grey images).
+LUMA = np.array([0.299, 0.587, 0.114], np.float32)
+
+
+def _grey(image) -> bool:
+    """Whether an ``(H, W, 3)`` image has three equal channels."""
+    return bool((image[..., 0] == image[..., 1]).all() and (image[..., 1] == image[..., 2]).all())
+
+
 def check_pair(left, right):
-    """Both images read (:func:`lss_kernels.io.read_image`) and of one size."""
+    """Both images read (:func:`lss_kernels.io.read_image`) and of one size.  When one view is
+    grey and the other colour, the colour one is made grey too (Rec. 601 luma): a grey pixel
+    compared with a colour one differs at the true match too (the rendered slanted scene:
+    occlusion F1 0.44 against 0.84 with both grey)."""
     from .io import read_image
     left = read_image(left, name="left")
     right = read_image(right, name="right")
     if left.shape != right.shape:
         raise ValueError(f"right: expected the size of left ({left.shape[1]}x{left.shape[0]}), "
                          f"got {right.shape[1]}x{right.shape[0]}")
+    grey = _grey(left), _grey(right)
+    if grey[0] != grey[1]:
+        as_grey = lambda img: np.repeat((img @ LUMA)[..., None], 3, axis=2).astype(np.float32)
+        left, right = (img if g else as_grey(img) for img, g in zip((left, right), grey))
     return left, right
 
 
