@@ -1,11 +1,11 @@
 """A stress set of hard rendered two-layer scenes with exact ground truth.
 
-Seven families (:data:`STRESS_FAMILIES`) of four scenes each, rendered by
+Eight families (:data:`STRESS_FAMILIES`) of four scenes each, rendered by
 :mod:`lss_kernels.scenes` into scene folders (``docs/scene-format.md``): periodic stripes,
-camouflage, weak and dark textures, curved backgrounds, wide occlusions, poor starts and
-non-elliptic outlines.  Geometry is given for the ``"medium"`` size (320x240) and scaled with
-the image (disparities, positions, radii); texture scales (stripe periods, cells) and grey
-levels are kept in pixels and levels.  ``d_max`` is the true maximum + 2 rounded up to a
+camouflage, weak and dark textures, curved backgrounds, wide occlusions, poor starts,
+non-elliptic outlines and small jumps.  Geometry is given for the ``"medium"`` size
+(320x240) and scaled with the image (disparities, positions, radii); texture scales (stripe
+periods, cells) and grey levels are kept in pixels and levels.  ``d_max`` is the true maximum + 2 rounded up to a
 multiple of 16; ``init_ellipse`` is a hand-placed ellipse: about the object's box (radii
 0.9-1.05 of it, a few pixels off centre), except in the ``init`` family.  ``meta.json`` also
 holds ``family`` and ``description``.
@@ -39,6 +39,7 @@ STRESS_FAMILIES = {
     "jump": "foreground 40-60 px nearer than the background: wide occlusion strips",
     "init": "hand ellipses covering about half of the object or spilling 30 % beyond it",
     "shape": "non-elliptic outlines: a rectangle, an L and a blob",
+    "fine": "small disparity jumps (3-7 px): occlusion strips a few pixels wide",
 }
 
 #: Image sizes (width, height); the families' geometry is written for "medium".
@@ -176,8 +177,23 @@ def _shape(rng) -> list:
     ]
 
 
+def _fine(rng) -> list:
+    """As :func:`_periodic`."""
+    return [
+        ("jump3", "foreground 3 px in front of the background",
+         {"d_fg": 15, "d_bg": 12}),
+        ("jump5_far", "foreground at 8 px over a background at 3 px",
+         {"d_fg": 8, "d_bg": 3}),
+        ("jump7_slanted", "about 7 px in front, both layers slanted",
+         {"d_fg": {"d": 20, "slope": (0.03, 0.01)}, "d_bg": {"d": 13, "slope": (-0.02, 0.01)}}),
+        ("thin", "a thin object (28 px wide) 6 px in front",
+         {"d_fg": 18, "d_bg": 12, "ellipse": (165.0, 120.0, 14.0, 90.0)}),
+    ]
+
+
 _FAMILY_SCENES = {"periodic": _periodic, "camouflage": _camouflage, "weak": _weak_family,
-                  "curved": _curved, "jump": _jump, "init": _init, "shape": _shape}
+                  "curved": _curved, "jump": _jump, "init": _init, "shape": _shape,
+                  "fine": _fine}
 
 
 def _layer(value, scale: float, centre) -> tuple:

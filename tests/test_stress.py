@@ -126,6 +126,19 @@ def test_wide_occlusions(scenes):
     assert max(s.d_max for s in jumps) == 48
 
 
+def test_small_jumps(scenes):
+    """The fine family's occluded strip left of the object is 1-3 px wide at the small size
+    (its jumps are halved there), and its thin object is under 16 px wide."""
+    for scene in (s for s in scenes.values() if s.meta["family"] == "fine"):
+        y = int(np.argmax(scene.fg_left.sum(axis=1)))
+        edge = np.flatnonzero(scene.fg_left[y])[0]
+        run = 0
+        while run < edge and scene.occ_left[y, edge - 1 - run]:
+            run += 1
+        assert 1 <= run <= 3, (scene.name, run)
+    assert scenes["fine_thin"].fg_left.sum(axis=1).max() < 16
+
+
 def test_init_family_starts(scenes):
     """Half covers: about half of the object; spills: the whole object and 30 % more."""
     for name, (lo, hi) in {"init_half_inside": (0.4, 0.6), "init_half_side": (0.35, 0.65)}.items():
@@ -180,7 +193,7 @@ def test_command_line(tmp_path, capsys):
 #: weak_bg_dark; the small periodic scenes are at the edge of what the solver does).
 FAMILY_FLOORS = {"camouflage_noise_noisy": 0.85, "curved_ball_dark": 0.8,
                  "init_spill30": 0.9, "jump_60_far": 0.95, "shape_L": 0.85,
-                 "weak_bg_dark": 0.9, "periodic_both_p7": 0.45}
+                 "weak_bg_dark": 0.9, "periodic_both_p7": 0.45, "fine_jump5_far": 0.84}
 
 
 @pytest.mark.slow
