@@ -52,6 +52,7 @@ import warnings
 import numpy as np
 
 from .model.init import InitError
+from .validate import LUMA
 
 __all__ = ["MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE", "MIN_JUMP", "PERIODIC",
            "PERIODIC_AREA", "RECOVERY", "ShortRangeWarning", "SwappedViewsWarning",
@@ -89,7 +90,7 @@ def periodicity(image) -> np.ndarray:
     ``(H, W)`` grey or ``(H, W, 3)`` RGB.  Tiles cover the image from the top left; the
     last ``MAX_PERIOD`` columns only serve as shifted copies.  Returns ``(rows, cols)``."""
     image = np.asarray(image, np.float64)
-    grey = image[..., :3] @ np.array([0.299, 0.587, 0.114]) if image.ndim == 3 else image
+    grey = image[..., :3] @ LUMA if image.ndim == 3 else image
     gx = np.diff(grey, axis=1)
     th, tw = TILE
     rows, cols = gx.shape[0] // th, (gx.shape[1] - MAX_PERIOD) // tw

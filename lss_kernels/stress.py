@@ -5,9 +5,10 @@ Eight families (:data:`STRESS_FAMILIES`) of four scenes each, rendered by
 camouflage, weak and dark textures, curved backgrounds, wide occlusions, poor starts,
 non-elliptic outlines and small jumps.  Geometry is given for the ``"medium"`` size
 (320x240) and scaled with the image (disparities, positions, radii); texture scales (stripe
-periods, cells) and grey levels are kept in pixels and levels.  ``d_max`` is the true maximum + 2 rounded up to a
-multiple of 16; ``init_ellipse`` is a hand-placed ellipse: about the object's box (radii
-0.9-1.05 of it, a few pixels off centre), except in the ``init`` family.  ``meta.json`` also
+periods, cells) and grey levels are kept in pixels and levels.  ``d_max`` is the true
+maximum + 2 rounded up to a multiple of 16; ``init_ellipse`` is a hand-placed ellipse: about
+the object's box (radii 0.9-1.05 of it, a few pixels off centre), except in the ``init``
+family.  ``meta.json`` also
 holds ``family`` and ``description``.
 
 Examples

@@ -35,7 +35,7 @@ def check_inputs(left, right, d_max, init, init_frame, params):
 
 
 #: Rec. 601 luma weights of R, G, B (what OpenCV and Pillow use to make grey images).
-LUMA = np.array([0.299, 0.587, 0.114], np.float32)
+LUMA = np.array([0.299, 0.587, 0.114])
 
 
 def _grey(image) -> bool:
