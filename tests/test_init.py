@@ -112,6 +112,25 @@ def test_background_fit_recovers_the_quadratic_under_an_object_and_stray_values(
     np.testing.assert_allclose(got, want, atol=1.5)
 
 
+def test_background_fit_from_a_start_keeps_a_small_jump_out():
+    """An object 1.5 above the background is within the default band: the fit from every
+    value bulges over it; fitted first from the pixels off the object, it stays out."""
+    from lss_kernels.model.init import _basis, background_fit
+    H, W = 60, 80
+    y, x = np.mgrid[0:H, 0:W]
+    want = np.array([-2.0, 0.5, 1.0, 1.0, -1.0, 6.0])
+    d = (_basis(x, y, H, W) @ want).astype(np.float32)
+    inside = ((x - 40) / 20.0) ** 2 + ((y - 30) / 15.0) ** 2 <= 1.0
+    d[inside] += 1.5
+    got, facts = background_fit(d)
+    assert facts["inliers"] == 1.0 and np.abs(got - want).max() > 0.3
+    start = ~(((x - 40) / 24.0) ** 2 + ((y - 30) / 19.0) ** 2 <= 1.0)   # a rough mask
+    got, facts = background_fit(d, band=1.0, start=start)
+    np.testing.assert_allclose(got, want, atol=1e-3)
+    assert facts["inliers"] == pytest.approx(1.0 - inside.mean())
+    assert background_fit(d, start=np.zeros((H, W), bool))[1]["inliers"] == 1.0  # empty: all
+
+
 def test_keep_above_drops_near_pixels_on_a_background_hump(region):
     """A background that bulges towards the camera in the middle of each row is near by the
     row test; above its own quadratic only the object is."""
@@ -178,6 +197,23 @@ def test_each_kind_finds_the_rendered_object(easy, kind):
     assert solver.init_info["kind"] == kind and solver.init_info["seconds"] > 0
     result = solver.run()
     assert _iou(result.foreground, scene.fg_left) >= 0.9
+
+
+def test_auto_finds_an_object_3_px_in_front(easy):
+    """A 3 px jump (1.5 cyclopean) is within the background fit's band: the first fit
+    bulges over the object and leaves no region above it; auto fits again from the pixels
+    that are not near and finds the object.  A 2 px jump is at the near pixels' contrast:
+    no object."""
+    from lss_kernels.model.init import InitError
+    from lss_kernels.scenes import make_scene
+    _, solver = easy
+    scene = make_scene("easy", seed=1, d_fg=11.0, d_bg=8.0)
+    solver.reset(scene.left, scene.right, solver.d_max, "auto")
+    assert _iou(solver.initial_foreground_left(), scene.fg_left) >= 0.8
+    assert solver.init_info["background_fit"]["start"].startswith("the pixels that are not")
+    scene = make_scene("easy", seed=1, d_fg=10.0, d_bg=8.0)
+    with pytest.raises(InitError, match="no foreground found"):
+        solver.reset(scene.left, scene.right, solver.d_max, "auto")
 
 
 def test_auto_on_a_textured_scene_records_no_periodicity_and_does_not_warn(easy):

@@ -34,7 +34,10 @@ and removes stray matches.  Then:
   ``OPENING`` square (thin ridges and specks go); their 4-connected components are the
   candidates, and the one with the largest ``area * (1 - 1.5 r)^2`` (``r`` = its
   centroid's distance from the image centre, as a fraction of the half-diagonal) is the
-  object: the largest near region closest to the centre.  It then takes back the near
+  object: the largest near region closest to the centre.  When no candidate is left, the
+  fit is made again from the pixels that are not near, with ``CONTRAST`` as its band: an
+  object less than the band in front (``fine_jump3``, 1.5 cyclopean pixels) is among the
+  first fit's inliers, and the quadratic bulges over it.  It then takes back the near
   pixels within ``REGROW`` of it: an object large enough to pull the fit up loses its rim
   to the fit.  On a periodic left image (the test above) ``auto`` has no ellipse to fall
   back on: it goes on and warns :class:`~lss_kernels.recovery.UnreliableStartWarning`.
@@ -151,12 +154,13 @@ def _basis(x, y, H: int, W: int) -> np.ndarray:
 
 
 def background_fit(d: np.ndarray, band: float = BACKGROUND_BAND, rounds: int = FIT_ROUNDS,
-                   samples: int = FIT_SAMPLES):
+                   samples: int = FIT_SAMPLES, start: np.ndarray = None):
     """A quadratic fitted to the background of ``d`` (an ``(H, W)`` map, negative = no
     value) robustly: least squares over every value, then ``rounds`` times over the values
     within ``band`` of the last fit (an object in front, or stray matches, drop out).
     The band widens to ``SPREAD`` robust standard deviations (1.4826 times the median
-    absolute residual) of the last inliers where d-bar is noisier than ``band``.  Returns
+    absolute residual) of the last inliers where d-bar is noisier than ``band``.  ``start``
+    (an ``(H, W)`` boolean mask): the first fit is over its values only.  Returns
     ``(coefficients on _basis, facts)``, or ``(None, facts)`` with fewer than 6 values."""
     H, W = d.shape
     ys, xs = np.nonzero(d >= 0)
@@ -166,6 +170,8 @@ def background_fit(d: np.ndarray, band: float = BACKGROUND_BAND, rounds: int = F
     ys, xs = ys[::step], xs[::step]
     basis, value = _basis(xs, ys, H, W), d[ys, xs].astype(np.float64)
     inliers = np.ones(value.shape, bool)
+    if start is not None and start[ys, xs].sum() >= 6:
+        inliers = start[ys, xs]
     for _ in range(rounds + 1):
         if inliers.sum() < 6:
             break
@@ -405,6 +411,17 @@ class InitialRegion:
         self.dilate(radius, radius if left is None else left)
         return self.label.to_numpy() >= 0
 
+    def _candidates(self, background):
+        """The near pixels ``contrast`` above ``background`` (None: all of them), opened,
+        as 4-connected candidates; the one :func:`pick_region` picks, as ``(mask, facts)``."""
+        if background is not None:
+            self.keep_above(background.astype(np.float32), CONTRAST)
+        self.erode(OPENING // 2)
+        self.dilate(OPENING // 2, OPENING // 2)
+        rounds = self.until_stable(self.propagate)
+        mask, facts = pick_region(self.label.to_numpy(), int(MIN_AREA * self.H * self.W))
+        return mask, {**facts, "rounds": rounds}
+
     def _point(self, point):
         H, W = self.H, self.W
         d = self.d.to_numpy()
@@ -439,17 +456,21 @@ class InitialRegion:
 
     def _auto(self):
         H, W = self.H, self.W
-        near = self.label.to_numpy() >= 0
-        background, fit = background_fit(self.d.to_numpy())
-        if background is not None:
-            self.keep_above(background.astype(np.float32), CONTRAST)
-        self.erode(OPENING // 2)
-        self.dilate(OPENING // 2, OPENING // 2)
-        rounds = self.until_stable(self.propagate)
-        mask, facts = pick_region(self.label.to_numpy(), int(MIN_AREA * H * W))
+        labels = self.label.to_numpy()
+        near = labels >= 0
+        d = self.d.to_numpy()
+        background, fit = background_fit(d)
+        mask, facts = self._candidates(background)
+        if mask is None and background is not None:
+            # a jump below the fit's band leaves the object among the fit's inliers, and the
+            # quadratic bulges over it: fit again from the pixels that are not near, with
+            # the near pixels' own contrast as the band
+            self.label.from_numpy(labels)
+            background, fit = background_fit(d, band=CONTRAST, start=~near)
+            mask, facts = self._candidates(background)
+            fit["start"] = "the pixels that are not near (no region above the first fit)"
         self.info = {"kind": "auto", "contrast_px": 2.0 * CONTRAST, "window": int(WINDOW * W),
-                     "background_fit": fit, "opening": OPENING, "rounds": rounds,
-                     "spill": SPILL, **facts}
+                     "background_fit": fit, "opening": OPENING, "spill": SPILL, **facts}
         if mask is None:
             raise InitError("init auto: no foreground found (no region stands nearer than "
                             "its surroundings); give --init point:X,Y, box:X0,Y0,X1,Y1 or "
