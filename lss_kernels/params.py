@@ -117,6 +117,10 @@ class Params:
         AD-Census cost and distinctness-weighted messages, and the second model kept when it
         is sound (:mod:`lss_kernels.recovery`; :func:`~lss_kernels.solve`, ``lss solve``,
         ``lss batch`` and ``lss eval``; a bare ``Solver.run`` does not).
+    photometric : bool
+        Correct the right view to the left one's photometry (a gain, a radial vignetting and
+        an offset fitted at the pair's matches) before the costs, where the views differ and
+        that model explains the difference (:mod:`lss_kernels.photometry`).
     """
 
     dt: float = 0.2
@@ -150,6 +154,7 @@ class Params:
     refine_ratio: float = 0.9
     message_ambiguity: float = 0.0
     recover: bool = True
+    photometric: bool = True
 
     def __post_init__(self):
         self.validate()
@@ -212,6 +217,9 @@ class Params:
              "a number in [0, 1] (0: off)")
         if not isinstance(self.recover, bool):
             raise ValueError(f"params.recover: expected True or False, got {self.recover!r}")
+        if not isinstance(self.photometric, bool):
+            raise ValueError(f"params.photometric: expected True or False, got "
+                             f"{self.photometric!r}")
 
     def replace(self, **changes) -> "Params":
         """A copy with some fields changed (validated)."""

@@ -18,7 +18,6 @@ The host reads two integers per iteration (flipped pixels and foreground area) f
 rule; nothing else leaves the device inside the loop.
 """
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 import taichi as ti
@@ -35,46 +34,12 @@ from .model.messages import Messages
 from .model.occlusion import OcclusionGeometry
 from .model.refine import LayerRefinement
 from .params import Params, c_max
+from .photometry import equalise
+from .result import Result
 from .model.shapes import GlobalShapes
 from .stopping import StopRule
 
 __all__ = ["Result", "Solver", "solve"]
-
-
-@dataclass
-class Result:
-    """Output of :func:`solve`.
-
-    Left view (the user's frame, Middlebury convention): ``disparity`` ``(H, W)`` float32 in
-    left-view pixels (finite, clamped to ``[0, d_max]``): each layer's surface refined by its
-    own matches (surface plus parallax, :mod:`lss_kernels.model.refine`; the surface itself
-    with ``Params(refine=False)``); ``surface``: the two quadratics' disparity (the paper's
-    model); ``occlusion`` (seen by the left camera, hidden from the right) and
-    ``foreground`` boolean ``(H, W)``.
-
-    Cyclopean frame (the model's): ``phi`` ``(H, W)`` (> 0 foreground), ``consensus_mean`` and
-    ``consensus_sigma`` ``(H, W)`` in left-view disparity units (sigma = d_max where no valid
-    patch covers the pixel).  ``theta_fg``, ``theta_bg``: coefficients of the left-view
-    disparity (2 Theta_j) over the basis {x^2, xy, y^2, x, y, 1} of raw cyclopean pixel
-    coordinates.  ``iterations`` run, ``stop_reason``, ``timings`` (seconds per stage) and
-    ``history`` (per-iteration statistics); ``recovery``: whether the model collapsed and
-    was solved again (:mod:`lss_kernels.recovery`; set by :func:`solve`, not by ``run``).
-    """
-
-    disparity: np.ndarray
-    surface: np.ndarray
-    occlusion: np.ndarray
-    foreground: np.ndarray
-    phi: np.ndarray
-    theta_fg: np.ndarray
-    theta_bg: np.ndarray
-    consensus_mean: np.ndarray
-    consensus_sigma: np.ndarray
-    iterations: int
-    stop_reason: str
-    timings: dict = field(default_factory=dict)
-    history: list = field(default_factory=list)
-    recovery: dict = field(default_factory=dict)
 
 
 @ti.data_oriented
@@ -174,6 +139,9 @@ class Solver:
         """Set-up of a solve in zeroed fields: images, cost volumes, the initial phi."""
         self.left_image = left
         self.d_max = float(d_max)
+        self.photometry = {"correct": False, "why": "Params.photometric is False"}
+        if self.params.photometric:
+            right, self.photometry = equalise(left, right, d_max)
         self.left.from_numpy(self.extent.padded(left))
         self.right.from_numpy(self.extent.padded(right))
 
@@ -438,7 +406,7 @@ class Solver:
                       phi=self.extent.image(self.levelset.phi), theta_fg=th[0], theta_bg=th[1],
                       consensus_mean=mean, consensus_sigma=sigma, iterations=self.iteration,
                       stop_reason=self.stop_reason or "not finished", timings=timings,
-                      history=list(self.history))
+                      history=list(self.history), photometry=dict(self.photometry))
 
     def close(self):
         """Free the solver's device memory (the object cannot be used afterwards)."""

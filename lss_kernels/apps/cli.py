@@ -167,6 +167,12 @@ def main_solve(args):
             line += (f"  occlusion F1 {summary['score']['occ_f1']:.3f}, "
                      f"bad-4.0 {summary['score']['bad4']:.2f}%")
         print(line)
+        photometry = summary.get("photometry", {})
+        if photometry.get("correct"):
+            print(f"lss solve: the views differ by {photometry['difference']:.3f} at their "
+                  f"matches; the right one corrected (gain {photometry['gain']:.3f}, "
+                  f"vignetting {photometry['vignetting']:+.3f}, offset "
+                  f"{photometry['offset']:+.3f})")
         recovery = summary.get("recovery", {})
         if "first_params" in recovery:
             first = ", ".join(f"{k}={v}" for k, v in recovery["first_params"].items())

@@ -157,11 +157,13 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
             # no start found (auto, a point): the scene scores as no answer, the run goes on
             unknown = np.full(scene.left.shape[:2], np.inf, np.float32)
             extra = {"iterations": 0, "stop_reason": f"no start: {error}", "error": str(error),
-                     "recovered": False, "periodic": False, "bad4_surface": 100.0}
+                     "recovered": False, "periodic": False, "photometric": False,
+                     "bad4_surface": 100.0}
             return unknown, np.zeros(unknown.shape, bool), extra, 0.0
         extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason),
                  "recovered": result.recovery.get("kept") == "retry",
                  "periodic": "first_params" in result.recovery,
+                 "photometric": bool(result.photometry.get("correct")),
                  "bad4_surface": float(metrics.score(result.surface, result.occlusion,
                                                      scene)["bad4"])}
         if trace:

@@ -1,0 +1,44 @@
+"""What a solve returns: :class:`Result`."""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Result"]
+
+
+@dataclass
+class Result:
+    """Output of :func:`solve`.
+
+    Left view (the user's frame, Middlebury convention): ``disparity`` ``(H, W)`` float32 in
+    left-view pixels (finite, clamped to ``[0, d_max]``): each layer's surface refined by its
+    own matches (surface plus parallax, :mod:`lss_kernels.model.refine`; the surface itself
+    with ``Params(refine=False)``); ``surface``: the two quadratics' disparity (the paper's
+    model); ``occlusion`` (seen by the left camera, hidden from the right) and
+    ``foreground`` boolean ``(H, W)``.
+
+    Cyclopean frame (the model's): ``phi`` ``(H, W)`` (> 0 foreground), ``consensus_mean`` and
+    ``consensus_sigma`` ``(H, W)`` in left-view disparity units (sigma = d_max where no valid
+    patch covers the pixel).  ``theta_fg``, ``theta_bg``: coefficients of the left-view
+    disparity (2 Theta_j) over the basis {x^2, xy, y^2, x, y, 1} of raw cyclopean pixel
+    coordinates.  ``iterations`` run, ``stop_reason``, ``timings`` (seconds per stage) and
+    ``history`` (per-iteration statistics); ``recovery``: whether the model collapsed and
+    was solved again (:mod:`lss_kernels.recovery`; set by :func:`solve`, not by ``run``);
+    ``photometry``: the right view's photometric correction (:mod:`lss_kernels.photometry`).
+    """
+
+    disparity: np.ndarray
+    surface: np.ndarray
+    occlusion: np.ndarray
+    foreground: np.ndarray
+    phi: np.ndarray
+    theta_fg: np.ndarray
+    theta_bg: np.ndarray
+    consensus_mean: np.ndarray
+    consensus_sigma: np.ndarray
+    iterations: int
+    stop_reason: str
+    timings: dict = field(default_factory=dict)
+    history: list = field(default_factory=list)
+    recovery: dict = field(default_factory=dict)
+    photometry: dict = field(default_factory=dict)
