@@ -455,7 +455,6 @@ class InitialRegion:
         return self._widened(SPILL, SPILL_LEFT)
 
     def _auto(self):
-        H, W = self.H, self.W
         labels = self.label.to_numpy()
         near = labels >= 0
         d = self.d.to_numpy()
@@ -469,8 +468,9 @@ class InitialRegion:
             background, fit = background_fit(d, band=CONTRAST, start=~near)
             mask, facts = self._candidates(background)
             fit["start"] = "the pixels that are not near (no region above the first fit)"
-        self.info = {"kind": "auto", "contrast_px": 2.0 * CONTRAST, "window": int(WINDOW * W),
-                     "background_fit": fit, "opening": OPENING, "spill": SPILL, **facts}
+        self.info = {"kind": "auto", "contrast_px": 2.0 * CONTRAST,
+                     "window": int(WINDOW * self.W), "background_fit": fit,
+                     "opening": OPENING, "spill": SPILL, **facts}
         if mask is None:
             raise InitError("init auto: no foreground found (no region stands nearer than "
                             "its surroundings); give --init point:X,Y, box:X0,Y0,X1,Y1 or "
