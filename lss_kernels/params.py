@@ -12,11 +12,14 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+from .model.offset import SHIFT
+
 
 def c_max(d_max) -> int:
     """The cyclopean search range for a left-view ``d_max``: candidates c = 1 ..
-    ``ceil(d_max / 2)``, at least 1."""
-    return max(1, int(math.ceil(float(d_max) / 2.0)))
+    ``ceil((d_max + 2) / 2)``, disparities ``2 .. d_max + 2``, or ``0 .. d_max`` for a pair
+    the solver searches from zero (:mod:`lss_kernels.model.offset`)."""
+    return max(1, int(math.ceil((float(d_max) + 2 * SHIFT) / 2.0)))
 
 
 @dataclass(frozen=True)

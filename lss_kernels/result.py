@@ -24,7 +24,8 @@ class Result:
     coordinates.  ``iterations`` run, ``stop_reason``, ``timings`` (seconds per stage) and
     ``history`` (per-iteration statistics); ``recovery``: whether the model collapsed and
     was solved again (:mod:`lss_kernels.recovery`; set by :func:`solve`, not by ``run``);
-    ``photometry``: the right view's photometric correction (:mod:`lss_kernels.photometry`).
+    ``photometry``: the right view's photometric correction (:mod:`lss_kernels.photometry`);
+    ``search``: where the disparity grid started, 2 or 0 px (:mod:`lss_kernels.model.offset`).
     """
 
     disparity: np.ndarray
@@ -42,3 +43,4 @@ class Result:
     history: list = field(default_factory=list)
     recovery: dict = field(default_factory=dict)
     photometry: dict = field(default_factory=dict)
+    search: dict = field(default_factory=dict)

@@ -31,6 +31,8 @@ from .model.init import InitialRegion, shift_columns
 from .model.levelset import LevelSet
 from .model.matching import MatchingCost
 from .model.messages import Messages
+from .model.offset import (FLOOR_SHARE, SHIFT, floor_share, info_to_user, model_pair,
+                           to_model_left, to_model_start, to_user_left)
 from .model.occlusion import OcclusionGeometry
 from .model.refine import LayerRefinement
 from .params import Params, c_max
@@ -51,7 +53,8 @@ class Solver:
     left, right : array ``(H, W[, C])`` or path
         Rectified pair; the left image is the reference.
     d_max : float
-        Largest disparity to search, in left-view pixels (cyclopean ``c_max = ceil(d_max/2)``).
+        Largest disparity to search, in left-view pixels (cyclopean ``c_max = ceil((d_max +
+        2) / 2)``: from 2 px, or from 0 px, :mod:`lss_kernels.model.offset`).
     init : tuple ``(cx, cy, rx, ry)``, boolean array ``(H, W)``, ``"auto"``, Point or Box
         Initial foreground: an ellipse or a mask, in the frame ``init_frame``; or found from
         the first consensus (:mod:`lss_kernels.model.init`; ``init_info`` says what was chosen).
@@ -128,8 +131,8 @@ class Solver:
         left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
                                                 self.params)
         if left.shape[:2] != (self.H, self.W) or c_max(d_max) != self.c_max:
-            raise ValueError(f"reset: expected a {self.W}x{self.H} pair with ceil(d_max / 2) "
-                             f"= {self.c_max} (this solver's fields), got "
+            raise ValueError(f"reset: expected a {self.W}x{self.H} pair with "
+                             f"c_max {self.c_max} (this solver's fields), got "
                              f"{left.shape[1]}x{left.shape[0]} with d_max {d_max}; build a "
                              f"new Solver for it")
         self.pool.zero()
@@ -142,12 +145,19 @@ class Solver:
         self.photometry = {"correct": False, "why": "Params.photometric is False"}
         if self.params.photometric:
             right, self.photometry = equalise(left, right, d_max)
-        self.left.from_numpy(self.extent.padded(left))
-        self.right.from_numpy(self.extent.padded(right))
 
         t0 = time.perf_counter()
-        self.matching.setup(self.left, self.right)
-        self.hierarchy.build_costs(self.matching, self.left, self.right)
+        self._load_pair(left, right, 0)
+        # a pair whose first consensus sits at the grid's floor is searched from 0 px
+        self._first_consensus()
+        share = floor_share(self.extent.image(self.hierarchy.consensus_mean),
+                            self.extent.image(self.hierarchy.precision))
+        self.search = {"from_zero": share >= FLOOR_SHARE, "floor_share": share,
+                       "disparities": [0.0, self.d_max] if share >= FLOOR_SHARE
+                       else [2.0, 2.0 * self.c_max]}
+        if self.search["from_zero"]:
+            self._load_pair(left, right, SHIFT)
+            self._first_consensus()
         self.costs.build(self.hierarchy.matching_cost, self.left, self.right, self.params)
         ti.sync()
         self.timings = {"setup_costs": time.perf_counter() - t0}
@@ -165,6 +175,21 @@ class Solver:
         self._t_loop = 0.0
         self.timings["setup_total"] = time.perf_counter() - t_start
 
+    @property
+    def offset(self):
+        """Model disparity less user disparity (lss_kernels.model.offset)."""
+        return 2 * self.shift
+
+    def _load_pair(self, left, right, shift):
+        """The model's pair for a grid moved by ``shift`` (lss_kernels.model.offset) into the
+        image fields, and its matching costs."""
+        self.shift = shift
+        model_left, model_right = model_pair(left, right, shift)
+        self.left.from_numpy(self.extent.padded(model_left))
+        self.right.from_numpy(self.extent.padded(model_right))
+        self.matching.setup(self.left, self.right)
+        self.hierarchy.build_costs(self.matching, self.left, self.right)
+
     # ------------------------------------------------------------------ initialisation
     def _initial_mask(self, init, init_frame):
         """The initial foreground in the cyclopean frame; also keeps it in the left view.
@@ -176,30 +201,31 @@ class Solver:
         found = not isinstance(init, (np.ndarray, tuple))
         if found:
             t0 = time.perf_counter()
-            self._first_consensus()
-            init, init_frame = self.initialiser.find(init, self.hierarchy.consensus_mean,
+            init, init_frame = self.initialiser.find(to_model_start(init, self.shift),
+                                                     self.hierarchy.consensus_mean,
                                                      self.hierarchy.precision,
                                                      left=self.left_image)
-            self.init_info = dict(self.initialiser.info, seconds=time.perf_counter() - t0)
+            self.init_info = dict(info_to_user(self.initialiser.info, self.shift),
+                                  seconds=time.perf_counter() - t0)
+        elif init_frame == "left":      # the user's left view -> the model's
+            init = (to_model_left(init, self.shift) if isinstance(init, np.ndarray)
+                    else (init[0] + self.shift,) + tuple(init[1:]))
         if isinstance(init, np.ndarray):
             region = lambda shift: shift_columns(init, shift)
         else:
             cx, cy, rx, ry = (float(v) for v in init)
             y, x = np.mgrid[0:H, 0:W].astype(np.float64)
             region = lambda shift: ((x - cx - shift) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0
-        shift = self._foreground_shift(region(0.0), consensus_ready=found)
+        shift = self._foreground_shift(region(0.0))
         if init_frame == "left":
-            self.initial_left = region(0.0)
+            self.initial_left = to_user_left(region(0.0), self.shift)
             return region(-shift)
-        self.initial_left = region(shift)
+        self.initial_left = to_user_left(region(shift), self.shift)
         return region(0.0)
 
-    def _foreground_shift(self, left_mask, consensus_ready=False):
+    def _foreground_shift(self, left_mask):
         """Half the foreground's left-view disparity: the median first consensus mean over
-        the initial region (read as if the frames coincided); ``consensus_ready``: the first
-        consensus is already in the hierarchy's fields."""
-        if not consensus_ready:
-            self._first_consensus()
+        the initial region (read as if the frames coincided)."""
         mean = self.extent.image(self.hierarchy.consensus_mean)
         prec = self.extent.image(self.hierarchy.precision)
         sel = left_mask & (prec > 0)
@@ -331,24 +357,26 @@ class Solver:
         ``refine``, the refined disparity (:mod:`lss_kernels.model.refine`; the disparity
         itself without ``params.refine``) comes fourth."""
         self.occ.render_left(self.shapes, self.levelset.phi)
-        clean = lambda d: np.clip(np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0), 0.0,
-                                  self.d_max).astype(np.float32)
-        out = (clean(self.extent.image(self.occ.disparity_left)),
-               self.extent.image(self.occ.occlusion_left).astype(bool),
-               self.extent.image(self.occ.foreground_left).astype(bool))
+        # the model's left view and disparities -> the user's (lss_kernels.model.offset)
+        user = lambda plane: to_user_left(self.extent.image(plane), self.shift)
+        clean = lambda d: np.clip(np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0)
+                                  - self.offset, 0.0, self.d_max).astype(np.float32)
+        out = (clean(user(self.occ.disparity_left)), user(self.occ.occlusion_left).astype(bool),
+               user(self.occ.foreground_left).astype(bool))
         if not refine or self.refinement is None:
             return out + (out[0],) if refine else out
         t0 = time.perf_counter()
         self.refinement.run(self.left, self.right, self.occ.disparity_left,
-                            self.occ.foreground_left, self.occ.occlusion_left, self.d_max)
+                            self.occ.foreground_left, self.occ.occlusion_left,
+                            self.d_max + self.offset)
         ti.sync()
         self.timings["refine"] = time.perf_counter() - t0
-        return out + (clean(self.extent.image(self.refinement.surface)),)
+        return out + (clean(user(self.refinement.surface)),)
 
     def consensus(self):
         """Consensus mean and sigma, cyclopean frame, left-view disparity units."""
         prec = self.extent.image(self.hierarchy.precision)
-        mean = 2.0 * self.extent.image(self.hierarchy.consensus_mean)
+        mean = 2.0 * self.extent.image(self.hierarchy.consensus_mean) - self.offset
         with np.errstate(divide="ignore"):
             sigma = np.where(prec > 0, 2.0 / np.sqrt(np.maximum(prec, 1e-30)), self.d_max)
         return mean.astype(np.float32), np.minimum(sigma, self.d_max).astype(np.float32)
@@ -360,7 +388,7 @@ class Solver:
         return dict(phi=self.extent.image(self.levelset.phi), consensus_mean=mean,
                     consensus_sigma=sigma, disparity=disparity, occlusion=occlusion,
                     foreground=foreground, initial_foreground=self.initial_foreground_left(),
-                    D=2.0 * self.extent.image(self.levelset.D))
+                    D=2.0 * self.extent.image(self.levelset.D) - self.offset)
 
     def initial_foreground_left(self):
         """The initial foreground in the left view."""
@@ -388,15 +416,16 @@ class Solver:
         # the iteration passes messages on as relays only: the same inputs again give the
         # last iteration's d_p, sigma_p and validity
         self.messages.run(beta, prior, prior, keep=True)
-        return dict(d=2 * c, cost=cost, matching_cost=matching, d_p=2.0 * lev.d_p[y, x],
-                    sigma_p=2.0 * lev.sigma_p[y, x], valid=bool(lev.valid[y, x]),
-                    mean_D=2.0 * d_mean)
+        return dict(d=2 * c - self.offset, cost=cost, matching_cost=matching,
+                    d_p=2.0 * lev.d_p[y, x] - self.offset, sigma_p=2.0 * lev.sigma_p[y, x],
+                    valid=bool(lev.valid[y, x]), mean_D=2.0 * d_mean - self.offset)
 
     def result(self):
         """The current model as a :class:`Result`."""
         surface, occlusion, foreground, disparity = self.left_view(refine=True)
         mean, sigma = self.consensus()
         th = self.shapes.pixel_coefficients(2.0)
+        th[:, 5] -= self.offset
         timings = dict(self.timings)
         timings["iterations_total"] = self._t_loop
         timings["total"] = (self.timings["setup_total"] + self._t_loop
@@ -406,7 +435,8 @@ class Solver:
                       phi=self.extent.image(self.levelset.phi), theta_fg=th[0], theta_bg=th[1],
                       consensus_mean=mean, consensus_sigma=sigma, iterations=self.iteration,
                       stop_reason=self.stop_reason or "not finished", timings=timings,
-                      history=list(self.history), photometry=dict(self.photometry))
+                      history=list(self.history), photometry=dict(self.photometry),
+                      search=dict(self.search))
 
     def close(self):
         """Free the solver's device memory (the object cannot be used afterwards)."""

@@ -40,7 +40,10 @@ def _check(kernel, spec, theta_rtol=3e-3, phi_atol=1e-4):
 @pytest.fixture(scope="module")
 def solver(ti_arch):
     from lss_kernels.solver import Solver
-    left, right, init = synthetic_pair(W, H, D_MAX, seed=1)
+    # seed 2: its foreground stays at 14-18 % of the pair over the six steps (seed 1's
+    # vanishes by the seventh, and Theta_1 fitted to a few dozen pixels is too ill-conditioned
+    # for float32 against float64)
+    left, right, init = synthetic_pair(W, H, D_MAX, seed=2)
     s = Solver(left, right, D_MAX, init, params=PARAMS)
     yield s
     s.close()
@@ -56,8 +59,8 @@ def test_one_and_several_iterations_match_the_kernels(solver):
     a change of rounding order in the messages moved Theta's fit by 3e-4): the chain would
     test round-off luck, not the iteration."""
     start = npi.state_from_solver(solver)
-    assert start.phi.shape == (H, W) and start.c_max == 8
-    assert [c.shape for c in start.costs] == [(H, W, 8)] * 3
+    assert start.phi.shape == (H, W) and start.c_max == 9      # disparities 0 .. 16
+    assert [c.shape for c in start.costs] == [(H, W, 9)] * 3
 
     # the first iteration, at the tighter tolerances of a single step from the set-up
     solver.step()

@@ -173,6 +173,9 @@ def main_solve(args):
                   f"matches; the right one corrected (gain {photometry['gain']:.3f}, "
                   f"vignetting {photometry['vignetting']:+.3f}, offset "
                   f"{photometry['offset']:+.3f})")
+        if summary.get("search", {}).get("from_zero"):
+            print(f"lss solve: {summary['search']['floor_share']:.0%} of the first matches lie "
+                  f"below 4 px; disparities searched from 0 px")
         recovery = summary.get("recovery", {})
         if "first_params" in recovery:
             first = ", ".join(f"{k}={v}" for k, v in recovery["first_params"].items())

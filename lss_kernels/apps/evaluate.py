@@ -158,12 +158,14 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
             unknown = np.full(scene.left.shape[:2], np.inf, np.float32)
             extra = {"iterations": 0, "stop_reason": f"no start: {error}", "error": str(error),
                      "recovered": False, "periodic": False, "photometric": False,
+                     "from_zero": False,
                      "bad4_surface": 100.0}
             return unknown, np.zeros(unknown.shape, bool), extra, 0.0
         extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason),
                  "recovered": result.recovery.get("kept") == "retry",
                  "periodic": "first_params" in result.recovery,
                  "photometric": bool(result.photometry.get("correct")),
+                 "from_zero": bool(result.search.get("from_zero")),
                  "bad4_surface": float(metrics.score(result.surface, result.occlusion,
                                                      scene)["bad4"])}
         if trace:

@@ -143,7 +143,7 @@ def run_job(job, out_dir, params, cache=None, callback=None, extra=None):
     info = {"name": job.name, "wall_seconds": round(time.perf_counter() - start, 3),
             "d_max": float(job.d_max), "arch": backend.current_arch(),
             "init": _jsonable(init_info), "recovery": _jsonable(result.recovery),
-            "photometry": _jsonable(result.photometry)}
+            "photometry": _jsonable(result.photometry), "search": _jsonable(result.search)}
     if job.scene is not None:
         from ..metrics import score
         info["score"] = {k: (float(v) if hasattr(v, "__float__") else v)

@@ -1,0 +1,144 @@
+"""Where the disparity grid starts (lss_kernels.model.offset): a pair whose background lies
+below 2 px is searched from 0 px, and what the solver takes and returns in the left view is
+in the user's columns either way."""
+import numpy as np
+import pytest
+
+from lss_kernels import solve
+from lss_kernels.metrics import score
+from lss_kernels.model.offset import (FLOOR_C, SHIFT, floor_share, info_to_user, model_pair,
+                                      to_model_left, to_model_start, to_user_left)
+from lss_kernels.model.init import AUTO, Box, Point
+from lss_kernels.params import c_max
+from lss_kernels.scenes import make_scene
+
+
+def test_the_model_pair_adds_offset_to_every_disparity():
+    rng = np.random.default_rng(0)
+    left, right = rng.random((2, 3, 12, 3)).astype(np.float32)
+    model_left, model_right = model_pair(left, right, SHIFT)
+    # a user pair (x_left, x_right = x_left - d) is the model's (x_left + SHIFT,
+    # x_right - SHIFT): disparity d + 2 SHIFT, the same cyclopean column
+    for x_left, d in ((5, 0), (7, 3), (11, 4)):
+        x_right = x_left - d
+        xl, xr = x_left + SHIFT, x_right - SHIFT
+        assert xl - xr == d + 2 * SHIFT and (xl + xr) == (x_left + x_right)
+        if xl < 12 and xr >= 0:
+            np.testing.assert_array_equal(model_left[:, xl], left[:, x_left])
+            np.testing.assert_array_equal(model_right[:, xr], right[:, x_right])
+    np.testing.assert_array_equal(model_left[:, 0], left[:, 0])      # edges repeated
+    np.testing.assert_array_equal(model_right[:, -1], right[:, -1])
+    unmoved = model_pair(left, right, 0)
+    np.testing.assert_array_equal(unmoved[0], left)
+    np.testing.assert_array_equal(unmoved[1], right)
+
+
+def test_left_view_planes_and_starts_move_between_the_views():
+    plane = np.arange(24.0).reshape(3, 8)
+    np.testing.assert_array_equal(to_user_left(to_model_left(plane, 1), 1)[:, :-1],
+                                  plane[:, :-1])
+    np.testing.assert_array_equal(to_model_left(plane, 1)[:, 1:], plane[:, :-1])
+    np.testing.assert_array_equal(to_user_left(plane, 0), plane)
+    assert to_model_start(Point(10.0, 4.0), 1) == Point(11.0, 4.0)
+    assert to_model_start(Box(1.0, 2.0, 5.0, 6.0), 1) == Box(2.0, 2.0, 6.0, 6.0)
+    assert to_model_start(AUTO, 1) == AUTO
+
+
+def test_the_floor_share_counts_confident_pixels_below_the_floor():
+    mean = FLOOR_C + np.array([[-1.0, -0.5, -0.1, 0.1], [1.0, 4.0, -0.5, -0.2]])
+    precision = np.array([[1.0, 1.0, 1.0, 1.0], [1.0, 1.0, 0.0, 0.0]])
+    assert floor_share(mean, precision) == pytest.approx(3 / 6)
+    assert floor_share(mean, np.zeros_like(mean)) == 0.0
+
+
+def test_the_search_range_covers_zero_to_d_max():
+    for d_max in (1, 2, 7, 8, 64, 65):
+        c = c_max(d_max)
+        # from 0 px: c = 1 .. c_max are the disparities 2c - 2 SHIFT
+        assert 2 * 1 - 2 * SHIFT <= 0 and 2 * c - 2 * SHIFT >= d_max
+        assert 2 * (c - 1) - 2 * SHIFT < d_max          # no wider than needed
+
+
+def test_an_init_report_moves_to_the_user_frame():
+    info = {"kind": "box", "box": [10.0, 2.0, 30.0, 20.0],
+            "centre": {"point": [20.0, 11.0], "seed_cyclopean": [18, 12],
+                       "seed_disparity": 14.0}, "area": 5}
+    out = info_to_user(info, 1)
+    assert out["box"] == [9.0, 2.0, 29.0, 20.0]
+    assert out["centre"] == {"point": [19.0, 11.0], "seed_cyclopean": [18, 12],
+                             "seed_disparity": 12.0}
+    assert out["area"] == 5 and info["centre"]["seed_disparity"] == 14.0
+
+
+def test_a_background_at_zero_disparity_is_fitted_at_zero(ti_arch):
+    # the search used to start at 2 px: a background at infinity was fitted there, with the
+    # occluded extent 2 px short
+    scene = _zero_background()
+    result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse)
+    assert result.search["from_zero"] and result.search["floor_share"] > 0.5
+    assert result.search["disparities"] == [0.0, scene.d_max]
+    assert result.theta_bg[5] == pytest.approx(0.0, abs=0.4)
+    assert abs(result.theta_bg[3]) < 0.01
+    s = score(result.disparity, result.occlusion, scene)
+    assert s["occ_f1"] >= 0.9 and s["bad4"] <= 2.0
+    assert result.disparity.min() >= 0.0
+    # the left-view maps are in the user's columns: the foreground's edges on each row
+    # within a pixel of the truth on average
+    rows = scene.fg_left.any(axis=1) & result.foreground.any(axis=1)
+    first = lambda m: np.argmax(m[rows], axis=1)
+    last = lambda m: m.shape[1] - 1 - np.argmax(m[rows, ::-1], axis=1)
+    assert abs(np.mean(first(result.foreground) - first(scene.fg_left))) < 0.6
+    assert abs(np.mean(last(result.foreground) - last(scene.fg_left))) < 0.6
+
+
+def _zero_background():
+    return make_scene(None, seed=2, width=160, height=120, d_fg=10.0, d_bg=0.0,
+                      ellipse=(82.0, 60.0, 36.0, 30.0), noise=0.01)
+
+
+@pytest.mark.parametrize("which", ["easy", "zero background"])
+def test_a_cyclopean_start_is_read_in_the_user_frame(ti_arch, which):
+    # the same ellipse given in the left view and, moved by half the foreground's
+    # disparity, in the cyclopean frame starts the same region, whether the grid starts at
+    # 2 px (easy: the background at 8 px) or at 0 px (the left view moved)
+    from lss_kernels import Solver
+    scene = make_scene("easy") if which == "easy" else _zero_background()
+    half = 12.0 if which == "easy" else 5.0
+    cx, cy, rx, ry = scene.init_ellipse
+    solver = Solver(scene.left, scene.right, scene.d_max, (cx, cy, rx, ry))
+    try:
+        assert solver.search["from_zero"] == (which != "easy")
+        from_left = solver.initial_mask.copy()
+        left_view = solver.initial_foreground_left().copy()
+        solver.reset(scene.left, scene.right, scene.d_max, (cx - half, cy, rx, ry),
+                     init_frame="cyclopean")
+        from_cyclopean = solver.initial_mask.copy()
+    finally:
+        solver.close()
+    assert (from_left != from_cyclopean).sum() <= 0.02 * from_left.sum()
+    # and the initial region reported in the left view is the ellipse given there
+    y, x = np.mgrid[0:scene.left.shape[0], 0:scene.left.shape[1]]
+    given = ((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0
+    assert (left_view != given).sum() <= 0.01 * given.sum()
+
+
+def test_the_cli_says_where_the_search_started(tmp_path):
+    import json
+    import subprocess
+    import sys
+    from lss_kernels import io
+    scene = _zero_background()
+    for name, image in (("l.png", scene.left), ("r.png", scene.right)):
+        io.write_png(tmp_path / name, np.round(np.clip(image, 0, 1) * 255).astype(np.uint8))
+    out = tmp_path / "out"
+    cx, cy, rx, ry = scene.init_ellipse
+    proc = subprocess.run([sys.executable, "-m", "lss_kernels.apps.cli", "solve",
+                           str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--dmax",
+                           str(scene.d_max), "--init", f"ellipse:{cx},{cy},{rx},{ry}",
+                           "--max-iterations", "20", "--arch", "cpu", "--out", str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert "disparities searched from 0 px" in proc.stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["search"]["from_zero"] is True
+    assert summary["search"]["disparities"] == [0.0, scene.d_max]
