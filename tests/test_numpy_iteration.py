@@ -40,10 +40,11 @@ def _check(kernel, spec, theta_rtol=3e-3, phi_atol=1e-4):
 @pytest.fixture(scope="module")
 def solver(ti_arch):
     from lss_kernels.solver import Solver
-    # seed 2: its foreground stays at 14-18 % of the pair over the six steps (seed 1's
-    # vanishes by the seventh, and Theta_1 fitted to a few dozen pixels is too ill-conditioned
-    # for float32 against float64)
-    left, right, init = synthetic_pair(W, H, D_MAX, seed=2)
+    # seed 0: its foreground grows from 13 to 19 % of the pair over the six steps.  Seed 1's
+    # vanishes by the seventh (Theta_1 fitted to a few dozen pixels is too ill-conditioned
+    # for float32 against float64); on seed 2 the 7x7 median of the fourth step picks, at
+    # one pixel, a neighbour 1.4e-4 away, two pre-median values being equal to round-off
+    left, right, init = synthetic_pair(W, H, D_MAX, seed=0)
     s = Solver(left, right, D_MAX, init, params=PARAMS)
     yield s
     s.close()
