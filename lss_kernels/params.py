@@ -15,11 +15,13 @@ from dataclasses import dataclass
 from .model.offset import SHIFT
 
 
-def c_max(d_max) -> int:
+def c_max(d_max, zero_floor=False) -> int:
     """The cyclopean search range for a left-view ``d_max``: candidates c = 1 ..
-    ``ceil((d_max + 2) / 2)``, disparities ``2 .. d_max + 2``, or ``0 .. d_max`` for a pair
-    the solver searches from zero (:mod:`lss_kernels.model.offset`)."""
-    return max(1, int(math.ceil((float(d_max) + 2 * SHIFT) / 2.0)))
+    ``ceil(d_max / 2)`` (the authors' disparities ``2 .. d_max``), at least 1; with
+    ``zero_floor`` (``Params.zero_floor``) one more: ``2 .. d_max + 2``, or ``0 .. d_max``
+    for a pair searched from zero (:mod:`lss_kernels.model.offset`)."""
+    extra = 2 * SHIFT if zero_floor else 0
+    return max(1, int(math.ceil((float(d_max) + extra) / 2.0)))
 
 
 @dataclass(frozen=True)
@@ -124,6 +126,11 @@ class Params:
         Correct the right view to the left one's photometry (a gain, a radial vignetting and
         an offset fitted at the pair's matches) before the costs, where the views differ and
         that model explains the difference (:mod:`lss_kernels.photometry`).
+    zero_floor : bool
+        Search a pair from 0 px when its first consensus puts at least 15 % of its confident
+        pixels below 4 px (a far background), else from 2 px as the authors' grid does; the
+        volumes hold one plane more (:mod:`lss_kernels.model.offset`).  Off by default: that
+        plane moves the first consensus of every pair a little.
     """
 
     dt: float = 0.2
@@ -158,6 +165,7 @@ class Params:
     message_ambiguity: float = 0.0
     recover: bool = True
     photometric: bool = True
+    zero_floor: bool = False
 
     def __post_init__(self):
         self.validate()
@@ -208,6 +216,9 @@ class Params:
         if not isinstance(self.subpixel_messages, bool):
             raise ValueError(f"params.subpixel_messages: expected True or False, got "
                              f"{self.subpixel_messages!r}")
+        if not isinstance(self.zero_floor, bool):
+            raise ValueError(f"params.zero_floor: expected True or False, got "
+                             f"{self.zero_floor!r}")
         if not isinstance(self.refine, bool):
             raise ValueError(f"params.refine: expected True or False, got {self.refine!r}")
         need("refine_passes", lambda v: isinstance(v, tuple) and len(v) >= 1 and all(

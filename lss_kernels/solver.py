@@ -53,8 +53,8 @@ class Solver:
     left, right : array ``(H, W[, C])`` or path
         Rectified pair; the left image is the reference.
     d_max : float
-        Largest disparity to search, in left-view pixels (cyclopean ``c_max = ceil((d_max +
-        2) / 2)``: from 2 px, or from 0 px, :mod:`lss_kernels.model.offset`).
+        Largest disparity to search, in left-view pixels (cyclopean ``c_max = ceil(d_max /
+        2)``; with ``Params.zero_floor`` one more, :mod:`lss_kernels.model.offset`).
     init : tuple ``(cx, cy, rx, ry)``, boolean array ``(H, W)``, ``"auto"``, Point or Box
         Initial foreground: an ellipse or a mask, in the frame ``init_frame``; or found from
         the first consensus (:mod:`lss_kernels.model.init`; ``init_info`` says what was chosen).
@@ -89,7 +89,7 @@ class Solver:
         left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
                                                 self.params)
         self.H, self.W = H, W = left.shape[:2]
-        self.c_max = C = c_max(d_max)
+        self.c_max = C = c_max(d_max, self.params.zero_floor)
         self.profile = profile
         check_memory(H, W, d_max)       # before the first field: a new solver's allocation
 
@@ -130,9 +130,11 @@ class Solver:
             raise RuntimeError("reset: the solver is closed; build a new Solver")
         left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
                                                 self.params)
-        if left.shape[:2] != (self.H, self.W) or c_max(d_max) != self.c_max:
-            raise ValueError(f"reset: expected a {self.W}x{self.H} pair with "
-                             f"c_max {self.c_max} (this solver's fields), got "
+        if (left.shape[:2] != (self.H, self.W)
+                or c_max(d_max, self.params.zero_floor) != self.c_max):
+            rule = "ceil((d_max + 2) / 2)" if self.params.zero_floor else "ceil(d_max / 2)"
+            raise ValueError(f"reset: expected a {self.W}x{self.H} pair with {rule} "
+                             f"= {self.c_max} (this solver's fields), got "
                              f"{left.shape[1]}x{left.shape[0]} with d_max {d_max}; build a "
                              f"new Solver for it")
         self.pool.zero()
@@ -148,14 +150,13 @@ class Solver:
 
         t0 = time.perf_counter()
         self._load_pair(left, right, 0)
-        # a pair whose first consensus sits at the grid's floor is searched from 0 px
-        self._first_consensus()
+        self._first_consensus()         # zero_floor: from 0 px if it sits at the floor
         share = floor_share(self.extent.image(self.hierarchy.consensus_mean),
                             self.extent.image(self.hierarchy.precision))
-        self.search = {"from_zero": share >= FLOOR_SHARE, "floor_share": share,
-                       "disparities": [0.0, self.d_max] if share >= FLOOR_SHARE
-                       else [2.0, 2.0 * self.c_max]}
-        if self.search["from_zero"]:
+        low = self.params.zero_floor and share >= FLOOR_SHARE
+        self.search = {"zero_floor": self.params.zero_floor, "from_zero": low, "floor_share":
+                       share, "disparities": [0.0, self.d_max] if low else [2.0, 2.0 * self.c_max]}
+        if low:
             self._load_pair(left, right, SHIFT)
             self._first_consensus()
         self.costs.build(self.hierarchy.matching_cost, self.left, self.right, self.params)

@@ -207,14 +207,10 @@ def test_auto_finds_an_object_3_px_in_front(easy):
     from lss_kernels.model.init import InitError
     from lss_kernels.scenes import make_scene
     _, solver = easy
-    overlaps = []
-    for seed in (1, 2, 3):
-        scene = make_scene("easy", seed=seed, d_fg=11.0, d_bg=8.0)
-        solver.reset(scene.left, scene.right, solver.d_max, "auto")
-        overlaps.append(_iou(solver.initial_foreground_left(), scene.fg_left))
-        assert solver.init_info["background_fit"]["start"].startswith("the pixels that are")
-    # measured 0.71, 0.93, 0.92 (seed 1 0.82 before the grid held a plane beyond d_max)
-    assert min(overlaps) >= 0.5 and np.mean(overlaps) >= 0.8, overlaps
+    scene = make_scene("easy", seed=1, d_fg=11.0, d_bg=8.0)
+    solver.reset(scene.left, scene.right, solver.d_max, "auto")
+    assert _iou(solver.initial_foreground_left(), scene.fg_left) >= 0.8
+    assert solver.init_info["background_fit"]["start"].startswith("the pixels that are not")
     scene = make_scene("easy", seed=1, d_fg=10.0, d_bg=8.0)
     with pytest.raises(InitError, match="no foreground found"):
         solver.reset(scene.left, scene.right, solver.d_max, "auto")

@@ -1,10 +1,10 @@
-"""Where the disparity grid starts (lss_kernels.model.offset): a pair whose background lies
-below 2 px is searched from 0 px, and what the solver takes and returns in the left view is
-in the user's columns either way."""
+"""Where the disparity grid starts (lss_kernels.model.offset): with ``Params.zero_floor`` a
+pair whose background lies below 2 px is searched from 0 px, and what the solver takes and
+returns in the left view is in the user's columns either way; without it, the authors' grid."""
 import numpy as np
 import pytest
 
-from lss_kernels import solve
+from lss_kernels import Params, solve
 from lss_kernels.metrics import score
 from lss_kernels.model.offset import (FLOOR_C, SHIFT, floor_share, info_to_user, model_pair,
                                       to_model_left, to_model_start, to_user_left)
@@ -51,9 +51,13 @@ def test_the_floor_share_counts_confident_pixels_below_the_floor():
     assert floor_share(mean, np.zeros_like(mean)) == 0.0
 
 
+ZERO = Params(zero_floor=True)
+
+
 def test_the_search_range_covers_zero_to_d_max():
     for d_max in (1, 2, 7, 8, 64, 65):
-        c = c_max(d_max)
+        assert c_max(d_max) == max(1, -(-d_max // 2))     # the authors' grid by default
+        c = c_max(d_max, zero_floor=True)
         # from 0 px: c = 1 .. c_max are the disparities 2c - 2 SHIFT
         assert 2 * 1 - 2 * SHIFT <= 0 and 2 * c - 2 * SHIFT >= d_max
         assert 2 * (c - 1) - 2 * SHIFT < d_max          # no wider than needed
@@ -74,7 +78,7 @@ def test_a_background_at_zero_disparity_is_fitted_at_zero(ti_arch):
     # the search used to start at 2 px: a background at infinity was fitted there, with the
     # occluded extent 2 px short
     scene = _zero_background()
-    result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse)
+    result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=ZERO)
     assert result.search["from_zero"] and result.search["floor_share"] > 0.5
     assert result.search["disparities"] == [0.0, scene.d_max]
     assert result.theta_bg[5] == pytest.approx(0.0, abs=0.4)
@@ -105,7 +109,7 @@ def test_a_cyclopean_start_is_read_in_the_user_frame(ti_arch, which):
     scene = make_scene("easy") if which == "easy" else _zero_background()
     half = 12.0 if which == "easy" else 5.0
     cx, cy, rx, ry = scene.init_ellipse
-    solver = Solver(scene.left, scene.right, scene.d_max, (cx, cy, rx, ry))
+    solver = Solver(scene.left, scene.right, scene.d_max, (cx, cy, rx, ry), params=ZERO)
     try:
         assert solver.search["from_zero"] == (which != "easy")
         from_left = solver.initial_mask.copy()
@@ -135,10 +139,28 @@ def test_the_cli_says_where_the_search_started(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "lss_kernels.apps.cli", "solve",
                            str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--dmax",
                            str(scene.d_max), "--init", f"ellipse:{cx},{cy},{rx},{ry}",
-                           "--max-iterations", "20", "--arch", "cpu", "--out", str(out)],
+                           "--max-iterations", "20", "--param", "zero_floor=true", "--arch",
+                           "cpu", "--out", str(out)],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     assert "disparities searched from 0 px" in proc.stdout
     summary = json.loads((out / "summary.json").read_text())
     assert summary["search"]["from_zero"] is True
     assert summary["search"]["disparities"] == [0.0, scene.d_max]
+
+
+def test_without_zero_floor_the_authors_grid_is_kept(ti_arch):
+    # the default: a 0 px background stays at the grid's floor, 2 px (and says so)
+    from lss_kernels import Solver
+    scene = _zero_background()
+    solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse,
+                    params=Params(max_iterations=1))
+    try:
+        assert solver.c_max == c_max(scene.d_max) == int(np.ceil(scene.d_max / 2))
+        assert solver.search["floor_share"] > 0.5 and not solver.search["from_zero"]
+        assert solver.search["disparities"] == [2.0, 2.0 * solver.c_max]
+        assert solver.shift == 0
+    finally:
+        solver.close()
+    with pytest.raises(ValueError, match="zero_floor"):
+        Params(zero_floor="yes")

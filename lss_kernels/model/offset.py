@@ -15,10 +15,12 @@ is the same, so phi, Theta and the consensus need no move, only their disparitie
 inputs (an ellipse, a mask, a point, a box) move right on the way in and left-view outputs
 back on the way out.  Disparity jumps, Delta-theta and the occluded extents are the same.
 
-Which pairs: those whose first consensus (Eq. 7 with no prior, the map the automatic start
-reads too) puts at least ``FLOOR_SHARE`` of its confident pixels near the grid's floor (below
-``FLOOR_C``: 4 px).  The volumes always hold ``c_max = ceil((d_max + 2) / 2)`` planes, so an
-unmoved pair searches ``2 .. d_max + 2`` and a moved one ``0 .. d_max``.  Measured (``lss
+Which pairs, with ``Params.zero_floor`` (off by default): those whose first consensus (Eq. 7
+with no prior, the map the automatic start reads too) puts at least ``FLOOR_SHARE`` of its
+confident pixels near the grid's floor (below ``FLOOR_C``: 4 px).  The volumes then hold
+``c_max = ceil((d_max + 2) / 2)`` planes, so an unmoved pair searches ``2 .. d_max + 2`` and
+a moved one ``0 .. d_max``; that extra plane moves every pair's first consensus a little,
+which is why it is not the default (``docs/design.md``).  Measured (``lss
 eval``; ``docs/design.md``): on 16 rendered 320x240 probes with the background at 0-3 px,
 mean occlusion F1 0.86 -> 0.96 (SGBM 0.93), the lowest 0.00 -> 0.89, bad-4.0 3.3 -> 0.1 %;
 the floor shares there 0.72-0.82, on paper15 0.00-0.06, where nothing moves.  Moving every
