@@ -12,16 +12,11 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from .model.offset import SHIFT
-
-
-def c_max(d_max, zero_floor=False) -> int:
+def c_max(d_max) -> int:
     """The cyclopean search range for a left-view ``d_max``: candidates c = 1 ..
-    ``ceil(d_max / 2)`` (the authors' disparities ``2 .. d_max``), at least 1; with
-    ``zero_floor`` (``Params.zero_floor``) one more: ``2 .. d_max + 2``, or ``0 .. d_max``
-    for a pair searched from zero (:mod:`lss_kernels.model.offset`)."""
-    extra = 2 * SHIFT if zero_floor else 0
-    return max(1, int(math.ceil((float(d_max) + extra) / 2.0)))
+    ``ceil(d_max / 2)`` (the authors' disparities ``2 .. d_max``), at least 1.  A pair
+    searched from 0 px holds one more (:mod:`lss_kernels.model.offset`)."""
+    return max(1, int(math.ceil(float(d_max) / 2.0)))
 
 
 @dataclass(frozen=True)
@@ -128,9 +123,8 @@ class Params:
         that model explains the difference (:mod:`lss_kernels.photometry`).
     zero_floor : bool
         Search a pair from 0 px when its first consensus puts at least 15 % of its confident
-        pixels below 4 px (a far background), else from 2 px as the authors' grid does; the
-        volumes hold one plane more (:mod:`lss_kernels.model.offset`).  Off by default: that
-        plane moves the first consensus of every pair a little.
+        pixels below 4 px (a far background), else from 2 px as the authors' grid does
+        (:mod:`lss_kernels.model.offset`).  Any other pair is solved exactly as without it.
     """
 
     dt: float = 0.2
@@ -165,7 +159,7 @@ class Params:
     message_ambiguity: float = 0.0
     recover: bool = True
     photometric: bool = True
-    zero_floor: bool = False
+    zero_floor: bool = True
 
     def __post_init__(self):
         self.validate()

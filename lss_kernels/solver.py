@@ -27,21 +27,26 @@ from .kernels.backend import FieldPool
 from .model import STAGES
 from .model.costs import BoundaryCosts
 from .model.hierarchy import PatchHierarchy
-from .model.init import InitialRegion, shift_columns
+from .model.init import InitialRegion
 from .model.levelset import LevelSet
 from .model.matching import MatchingCost
 from .model.messages import Messages
-from .model.offset import (FLOOR_SHARE, SHIFT, floor_share, info_to_user, model_pair,
-                           to_model_left, to_model_start, to_user_left)
+from .model.offset import (SHIFT, info_to_user, model_pair, search_range, to_model_left,
+                           to_model_start, to_user_left)
 from .model.occlusion import OcclusionGeometry
 from .model.refine import LayerRefinement
 from .params import Params, c_max
 from .photometry import equalise
 from .result import Result
 from .model.shapes import GlobalShapes
+from .model.start import cyclopean_start
 from .stopping import StopRule
 
 __all__ = ["Result", "Solver", "solve"]
+
+#: What a solver holds per disparity grid (:meth:`Solver._use`).
+_GRID = ("c_max", "pool", "extent", "left", "right", "matching", "hierarchy", "messages",
+         "costs", "shapes", "initialiser", "occ", "levelset", "refinement")
 
 
 @ti.data_oriented
@@ -54,7 +59,7 @@ class Solver:
         Rectified pair; the left image is the reference.
     d_max : float
         Largest disparity to search, in left-view pixels (cyclopean ``c_max = ceil(d_max /
-        2)``; with ``Params.zero_floor`` one more, :mod:`lss_kernels.model.offset`).
+        2)``; one more for a pair searched from 0 px, :mod:`lss_kernels.model.offset`).
     init : tuple ``(cx, cy, rx, ry)``, boolean array ``(H, W)``, ``"auto"``, Point or Box
         Initial foreground: an ellipse or a mask, in the frame ``init_frame``; or found from
         the first consensus (:mod:`lss_kernels.model.init`; ``init_info`` says what was chosen).
@@ -80,7 +85,7 @@ class Solver:
 
     def __init__(self, left, right, d_max, init, params=None, arch=None, init_frame="left",
                  profile=False):
-        from .validate import check_inputs, check_memory
+        from .validate import check_inputs
         t_start = time.perf_counter()
         backend.before_solver(arch)
         self.params = params if params is not None else Params()
@@ -88,11 +93,34 @@ class Solver:
             raise TypeError(f"params: expected lss_kernels.Params, got {type(params).__name__}")
         left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
                                                 self.params)
-        self.H, self.W = H, W = left.shape[:2]
-        self.c_max = C = c_max(d_max, self.params.zero_floor)
+        self.H, self.W = left.shape[:2]
         self.profile = profile
-        check_memory(H, W, d_max)       # before the first field: a new solver's allocation
+        self.pool, self._grids = None, {}
+        self.c_release = c_max(d_max)   # the authors' grid; a pair from 0 px holds one more
+        self._use(self.c_release)
+        self._load(left, right, d_max, init, init_frame, t_start)
 
+    def _use(self, C):
+        """Make the fields and kernels of ``C`` cyclopean candidates the solve's, zeroed: built
+        the first time, kept when another grid is taken up (a solver holds the authors' grid
+        and, once a pair was searched from 0 px, the grid of one plane more)."""
+        if self.pool is not None and self.c_max != C:
+            self._grids[self.c_max] = {name: getattr(self, name) for name in _GRID}
+        if self.pool is not None and self.c_max == C:
+            self.pool.zero()
+        elif C in self._grids:
+            for name, value in self._grids.pop(C).items():
+                setattr(self, name, value)
+            self.pool.zero()
+        else:
+            self._build(C)
+
+    def _build(self, C):
+        """The fields and kernels of a solve with ``C`` cyclopean candidates, in a new pool."""
+        from .validate import check_memory
+        H, W = self.H, self.W
+        check_memory(H, W, 2 * C)       # before the first field: a new pool's allocation
+        self.c_max = C
         # every field of the solve has the shape of the image's size bucket, and the kernels
         # read H and W from the extent at run time: they compile once per bucket (and range)
         pool = FieldPool()
@@ -115,7 +143,6 @@ class Solver:
         pool.finalize()
         self.levelset.setup()
         self.costs.setup(self.levelset.distance, self.levelset.distance_map)
-        self._load(left, right, d_max, init, init_frame, t_start)
 
     def reset(self, left, right, d_max, init, init_frame="left"):
         """Start over on another pair of the same size and the same ``c_max``, in this
@@ -130,14 +157,12 @@ class Solver:
             raise RuntimeError("reset: the solver is closed; build a new Solver")
         left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
                                                 self.params)
-        if (left.shape[:2] != (self.H, self.W)
-                or c_max(d_max, self.params.zero_floor) != self.c_max):
-            rule = "ceil((d_max + 2) / 2)" if self.params.zero_floor else "ceil(d_max / 2)"
-            raise ValueError(f"reset: expected a {self.W}x{self.H} pair with {rule} "
-                             f"= {self.c_max} (this solver's fields), got "
+        if left.shape[:2] != (self.H, self.W) or c_max(d_max) != self.c_release:
+            raise ValueError(f"reset: expected a {self.W}x{self.H} pair with ceil(d_max / 2) = "
+                             f"{self.c_release} (this solver's fields), got "
                              f"{left.shape[1]}x{left.shape[0]} with d_max {d_max}; build a "
                              f"new Solver for it")
-        self.pool.zero()
+        self._use(self.c_release)
         self._load(left, right, d_max, init, init_frame, t_start)
 
     def _load(self, left, right, d_max, init, init_frame, t_start):
@@ -150,13 +175,12 @@ class Solver:
 
         t0 = time.perf_counter()
         self._load_pair(left, right, 0)
-        self._first_consensus()         # zero_floor: from 0 px if it sits at the floor
-        share = floor_share(self.extent.image(self.hierarchy.consensus_mean),
-                            self.extent.image(self.hierarchy.precision))
-        low = self.params.zero_floor and share >= FLOOR_SHARE
-        self.search = {"zero_floor": self.params.zero_floor, "from_zero": low, "floor_share":
-                       share, "disparities": [0.0, self.d_max] if low else [2.0, 2.0 * self.c_max]}
-        if low:
+        self._first_consensus()         # from 0 px if it sits at the grid's floor
+        self.search = search_range(self.extent.image(self.hierarchy.consensus_mean),
+                                   self.extent.image(self.hierarchy.precision),
+                                   self.params.zero_floor, self.c_release)
+        if self.search["from_zero"]:    # one plane more, in fields of their own
+            self._use(self.c_release + 1)
             self._load_pair(left, right, SHIFT)
             self._first_consensus()
         self.costs.build(self.hierarchy.matching_cost, self.left, self.right, self.params)
@@ -193,11 +217,8 @@ class Solver:
 
     # ------------------------------------------------------------------ initialisation
     def _initial_mask(self, init, init_frame):
-        """The initial foreground in the cyclopean frame; also keeps it in the left view.
-
-        Frames differ by half the foreground's disparity (x_left = x_c + c), estimated from the
-        first consensus."""
-        H, W = self.H, self.W
+        """The initial foreground in the cyclopean frame (:mod:`lss_kernels.model.start`);
+        also keeps it in the left view."""
         self.init_info = {"kind": "mask" if isinstance(init, np.ndarray) else "ellipse"}
         found = not isinstance(init, (np.ndarray, tuple))
         if found:
@@ -211,26 +232,11 @@ class Solver:
         elif init_frame == "left":      # the user's left view -> the model's
             init = (to_model_left(init, self.shift) if isinstance(init, np.ndarray)
                     else (init[0] + self.shift,) + tuple(init[1:]))
-        if isinstance(init, np.ndarray):
-            region = lambda shift: shift_columns(init, shift)
-        else:
-            cx, cy, rx, ry = (float(v) for v in init)
-            y, x = np.mgrid[0:H, 0:W].astype(np.float64)
-            region = lambda shift: ((x - cx - shift) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0
-        shift = self._foreground_shift(region(0.0))
-        if init_frame == "left":
-            self.initial_left = to_user_left(region(0.0), self.shift)
-            return region(-shift)
-        self.initial_left = to_user_left(region(shift), self.shift)
-        return region(0.0)
-
-    def _foreground_shift(self, left_mask):
-        """Half the foreground's left-view disparity: the median first consensus mean over
-        the initial region (read as if the frames coincided)."""
-        mean = self.extent.image(self.hierarchy.consensus_mean)
-        prec = self.extent.image(self.hierarchy.precision)
-        sel = left_mask & (prec > 0)
-        return float(np.median(mean[sel])) if sel.any() else 0.0
+        mask, left = cyclopean_start(init, init_frame,
+                                     self.extent.image(self.hierarchy.consensus_mean),
+                                     self.extent.image(self.hierarchy.precision))
+        self.initial_left = to_user_left(left, self.shift)
+        return mask
 
     def _first_consensus(self):
         """The consensus with no prior and no validity (Eqs. 4-6 brought down to pixels)."""
@@ -439,43 +445,32 @@ class Solver:
                       history=list(self.history), photometry=dict(self.photometry),
                       search=dict(self.search))
 
+    def _all_grids(self):
+        current = [{name: getattr(self, name) for name in _GRID}] if self.pool is not None else []
+        return current + list(self._grids.values())
+
     def close(self):
         """Free the solver's device memory (the object cannot be used afterwards)."""
-        if self.pool is not None:
-            self.levelset.destroy()
-            self.costs.destroy()
-            self.pool.destroy()
-            self.pool = None
+        for grid in self._all_grids():
+            grid["levelset"].destroy()
+            grid["costs"].destroy()
+            grid["pool"].destroy()
+        self.pool, self._grids = None, {}
 
     @property
     def memory_bytes(self):
         """Bytes held by the solver's fields, distance-transform scratch included."""
-        if self.pool is None:
-            return 0
-        return self.pool.nbytes + self.levelset.scratch_bytes + self.costs.scratch_bytes
+        return sum(g["pool"].nbytes + g["levelset"].scratch_bytes + g["costs"].scratch_bytes
+                   for g in self._all_grids())
 
 
 def solve(left, right, d_max, init, params=None, arch=None, callback=None, init_frame="left",
           profile=False):
     """Solve a rectified pair with the two-layer level-set model (the whole paper).
 
-    Parameters
-    ----------
-    left, right : array ``(H, W[, C])`` or path
-        Rectified pair; the left image is the reference (``x_right = x_left - d``; swapped
-        views warn :class:`~lss_kernels.recovery.SwappedViewsWarning` before the solve).
-    d_max : float
-        Largest disparity to search, left-view pixels.
-    init : tuple ``(cx, cy, rx, ry)``, boolean array ``(H, W)``, ``"auto"``, Point or Box
-        Initial foreground (an ellipse in pixel coordinates, a mask, or found automatically:
-        anywhere, under a left-view point, or inside a left-view box).
-    params : Params, optional
-    arch : str, optional
-        Taichi arch (``"cpu"``, ``"cuda"``, ``"vulkan"``, ...).
-    callback : callable, optional
-        ``callback(solver, stats)`` after every iteration; return ``False`` to stop.
-    init_frame : {"left", "cyclopean"}
-        Frame of ``init``.
+    Arguments as for :class:`Solver` (swapped views warn
+    :class:`~lss_kernels.recovery.SwappedViewsWarning` before the solve), and ``callback``:
+    ``callback(solver, stats)`` after every iteration; return ``False`` to stop.
 
     Returns
     -------

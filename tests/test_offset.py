@@ -1,13 +1,15 @@
-"""Where the disparity grid starts (lss_kernels.model.offset): with ``Params.zero_floor`` a
-pair whose background lies below 2 px is searched from 0 px, and what the solver takes and
-returns in the left view is in the user's columns either way; without it, the authors' grid."""
+"""Where the disparity grid starts (lss_kernels.model.offset): with ``Params.zero_floor`` (the
+default) a pair whose background lies below 2 px is searched from 0 px, in fields of one plane
+more, and what the solver takes and returns in the left view is in the user's columns either
+way; every other pair, and every pair without it, keeps the authors' grid and fields."""
 import numpy as np
 import pytest
 
 from lss_kernels import Params, solve
 from lss_kernels.metrics import score
-from lss_kernels.model.offset import (FLOOR_C, SHIFT, floor_share, info_to_user, model_pair,
-                                      to_model_left, to_model_start, to_user_left)
+from lss_kernels.model.offset import (FLOOR_C, FLOOR_SHARE, SHIFT, floor_share, info_to_user,
+                                      model_pair, search_range, to_model_left, to_model_start,
+                                      to_user_left)
 from lss_kernels.model.init import AUTO, Box, Point
 from lss_kernels.params import c_max
 from lss_kernels.scenes import make_scene
@@ -51,16 +53,30 @@ def test_the_floor_share_counts_confident_pixels_below_the_floor():
     assert floor_share(mean, np.zeros_like(mean)) == 0.0
 
 
-ZERO = Params(zero_floor=True)
+ZERO = Params()
+OFF = Params(zero_floor=False)
 
 
 def test_the_search_range_covers_zero_to_d_max():
     for d_max in (1, 2, 7, 8, 64, 65):
-        assert c_max(d_max) == max(1, -(-d_max // 2))     # the authors' grid by default
-        c = c_max(d_max, zero_floor=True)
+        assert c_max(d_max) == max(1, -(-d_max // 2))     # the authors' grid
+        c = c_max(d_max) + 1                              # a pair searched from 0 px
         # from 0 px: c = 1 .. c_max are the disparities 2c - 2 SHIFT
         assert 2 * 1 - 2 * SHIFT <= 0 and 2 * c - 2 * SHIFT >= d_max
         assert 2 * (c - 1) - 2 * SHIFT < d_max          # no wider than needed
+
+
+def test_a_pair_moves_only_with_the_option_and_enough_pixels_at_the_floor():
+    mean = np.full((4, 5), FLOOR_C + 3.0)
+    precision = np.ones_like(mean)
+    mean.flat[:4] = FLOOR_C - 1.0                      # 4 of 20 = 0.20 at the floor
+    assert 4 / 20 >= FLOOR_SHARE
+    moved = search_range(mean, precision, True, 33)
+    assert moved == {"zero_floor": True, "from_zero": True, "floor_share": 0.2,
+                     "disparities": [0.0, 66.0]}
+    assert search_range(mean, precision, False, 33)["disparities"] == [2.0, 66.0]
+    mean.flat[:2] = FLOOR_C + 3.0                      # 0.10: the authors' grid
+    assert not search_range(mean, precision, True, 33)["from_zero"]
 
 
 def test_an_init_report_moves_to_the_user_frame():
@@ -80,7 +96,7 @@ def test_a_background_at_zero_disparity_is_fitted_at_zero(ti_arch):
     scene = _zero_background()
     result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=ZERO)
     assert result.search["from_zero"] and result.search["floor_share"] > 0.5
-    assert result.search["disparities"] == [0.0, scene.d_max]
+    assert result.search["disparities"] == [0.0, 2.0 * c_max(scene.d_max)]
     assert result.theta_bg[5] == pytest.approx(0.0, abs=0.4)
     assert abs(result.theta_bg[3]) < 0.01
     s = score(result.disparity, result.occlusion, scene)
@@ -139,22 +155,21 @@ def test_the_cli_says_where_the_search_started(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "lss_kernels.apps.cli", "solve",
                            str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--dmax",
                            str(scene.d_max), "--init", f"ellipse:{cx},{cy},{rx},{ry}",
-                           "--max-iterations", "20", "--param", "zero_floor=true", "--arch",
-                           "cpu", "--out", str(out)],
+                           "--max-iterations", "20", "--arch", "cpu", "--out", str(out)],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     assert "disparities searched from 0 px" in proc.stdout
     summary = json.loads((out / "summary.json").read_text())
     assert summary["search"]["from_zero"] is True
-    assert summary["search"]["disparities"] == [0.0, scene.d_max]
+    assert summary["search"]["disparities"] == [0.0, 2.0 * c_max(scene.d_max)]
 
 
 def test_without_zero_floor_the_authors_grid_is_kept(ti_arch):
-    # the default: a 0 px background stays at the grid's floor, 2 px (and says so)
+    # a 0 px background stays at the grid's floor, 2 px (and says so)
     from lss_kernels import Solver
     scene = _zero_background()
     solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse,
-                    params=Params(max_iterations=1))
+                    params=Params(zero_floor=False, max_iterations=1))
     try:
         assert solver.c_max == c_max(scene.d_max) == int(np.ceil(scene.d_max / 2))
         assert solver.search["floor_share"] > 0.5 and not solver.search["from_zero"]
@@ -164,3 +179,72 @@ def test_without_zero_floor_the_authors_grid_is_kept(ti_arch):
         solver.close()
     with pytest.raises(ValueError, match="zero_floor"):
         Params(zero_floor="yes")
+
+
+def test_a_pair_that_does_not_move_is_solved_as_without_the_option(ti_arch):
+    # the option reaches no other pair: the same fields (the authors' plane count) and,
+    # bit for bit, the same model
+    from lss_kernels import Solver
+    scene = make_scene("easy")
+    outs = []
+    for params in (Params(max_iterations=12), Params(zero_floor=False, max_iterations=12)):
+        solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=params)
+        try:
+            assert solver.c_max == c_max(scene.d_max) and not solver.search["from_zero"]
+            outs.append(solver.run())
+        finally:
+            solver.close()
+    np.testing.assert_array_equal(outs[0].phi, outs[1].phi)
+    np.testing.assert_array_equal(outs[0].disparity, outs[1].disparity)
+
+
+def test_a_reset_solver_moves_between_the_grids_like_new_solvers(ti_arch):
+    # from 0 px (one plane more) to the authors' grid and back, in one solver: each solve
+    # as a new solver's
+    from lss_kernels import Solver
+    zero = _zero_background()
+    easy = make_scene(None, seed=2, width=160, height=120, d_fg=10.0, d_bg=6.0,
+                      ellipse=(82.0, 60.0, 36.0, 30.0), noise=0.01)
+    assert c_max(zero.d_max) == c_max(easy.d_max)
+    params = Params(max_iterations=8)
+    fresh = []
+    for scene in (zero, easy):
+        solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=params)
+        try:
+            fresh.append((solver.c_max, solver.run()))
+        finally:
+            solver.close()
+    assert fresh[0][0] == c_max(zero.d_max) + 1 and fresh[1][0] == c_max(easy.d_max)
+    solver = Solver(zero.left, zero.right, zero.d_max, zero.init_ellipse, params=params)
+    try:
+        for scene, (planes, want) in ((easy, fresh[1]), (zero, fresh[0])):
+            solver.reset(scene.left, scene.right, scene.d_max, scene.init_ellipse)
+            assert solver.c_max == planes
+            got = solver.run()
+            np.testing.assert_array_equal(got.phi, want.phi)
+            np.testing.assert_array_equal(got.disparity, want.disparity)
+    finally:
+        solver.close()
+
+
+def test_a_left_view_start_moves_by_half_the_foreground_disparity():
+    # lss_kernels.model.start: x_left = x_c + c, with c the median consensus over the region
+    from lss_kernels.model.start import cyclopean_start
+    H, W = 40, 60
+    mean = np.full((H, W), 2.0)
+    mean[:, 20:40] = 6.0                    # the object's rows and columns: c = 6
+    precision = np.ones((H, W))
+    precision[:, 20:23] = 0.0               # no consensus there: not read
+    mask = np.zeros((H, W), bool)
+    mask[10:30, 22:38] = True
+    cyclopean, left = cyclopean_start(mask, "left", mean, precision)
+    np.testing.assert_array_equal(left, mask)
+    np.testing.assert_array_equal(cyclopean[:, 16:32], mask[:, 22:38])
+    assert cyclopean.sum() == mask.sum()
+    back, moved = cyclopean_start(cyclopean, "cyclopean", mean, precision)
+    np.testing.assert_array_equal(back, cyclopean)
+    # read at columns 16-31: four columns at 2, nine at 6 (20-22 have no consensus)
+    np.testing.assert_array_equal(moved, mask)
+    ellipse, _ = cyclopean_start((30.0, 20.0, 5.0, 5.0), "left", mean, precision)
+    y, x = np.mgrid[0:H, 0:W]
+    np.testing.assert_array_equal(ellipse, ((x - 24.0) / 5) ** 2 + ((y - 20.0) / 5) ** 2 <= 1)

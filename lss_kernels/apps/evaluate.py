@@ -95,7 +95,7 @@ def _solve(scene: io.Scene, params, trace: bool = False, init=None):
     iteration.  Returns the result, the trace rows and the seconds spent scoring them."""
     from ..solver import Solver
     init, frame = scene_start(scene, init)
-    key = (scene.left.shape[:2], c_max(scene.d_max, params.zero_floor), params)
+    key = (scene.left.shape[:2], c_max(scene.d_max), params)
     solver = _SOLVER.get(key)
     if solver is None:
         _release_solver()

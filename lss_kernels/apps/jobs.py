@@ -111,7 +111,7 @@ class SolverCache:
         from ..validate import check_inputs
         left, right, d_max, init = check_inputs(job.left, job.right, job.d_max, job.init,
                                                 job.init_frame, params)
-        key = (left.shape[:2], c_max(d_max, params.zero_floor), params)
+        key = (left.shape[:2], c_max(d_max), params)
         if key == self.key:
             self.solver.reset(left, right, d_max, init, init_frame=job.init_frame)
         else:

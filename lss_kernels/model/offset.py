@@ -15,22 +15,22 @@ is the same, so phi, Theta and the consensus need no move, only their disparitie
 inputs (an ellipse, a mask, a point, a box) move right on the way in and left-view outputs
 back on the way out.  Disparity jumps, Delta-theta and the occluded extents are the same.
 
-Which pairs, with ``Params.zero_floor`` (off by default): those whose first consensus (Eq. 7
+Which pairs, with ``Params.zero_floor`` (on by default): those whose first consensus (Eq. 7
 with no prior, the map the automatic start reads too) puts at least ``FLOOR_SHARE`` of its
-confident pixels near the grid's floor (below ``FLOOR_C``: 4 px).  The volumes then hold
-``c_max = ceil((d_max + 2) / 2)`` planes, so an unmoved pair searches ``2 .. d_max + 2`` and
-a moved one ``0 .. d_max``; that extra plane moves every pair's first consensus a little,
-which is why it is not the default (``docs/design.md``).  Measured (``lss
-eval``; ``docs/design.md``): on 16 rendered 320x240 probes with the background at 0-3 px,
-mean occlusion F1 0.86 -> 0.96 (SGBM 0.93), the lowest 0.00 -> 0.89, bad-4.0 3.3 -> 0.1 %;
-the floor shares there 0.72-0.82, on paper15 0.00-0.06, where nothing moves.  Moving every
-pair would cost paper15 0.01 of mean F1 (0.783; scene 3 0.96 -> 0.89, a bulge of foreground
-held in the occluded strip left of the pot).
+confident pixels near the grid's floor (below ``FLOOR_C``: 4 px).  Such a pair is loaded
+again into fields of one plane more, ``c_max = ceil(d_max / 2) + 1``, and searched over
+``0 .. 2 ceil(d_max / 2)``; every other pair keeps the authors' grid and fields, bit for
+bit.  (Fields of one plane more for every pair would move every pair's first consensus a
+little, through the levels' normalisation and the messages' sigma, and flip scenes on a
+knife edge; moving every pair would cost paper15 0.01 of mean F1: ``docs/design.md``.)
+Measured (``lss eval``): on 16 rendered 320x240 probes with the background at 0-3 px, mean
+occlusion F1 0.86 -> 0.96 (SGBM 0.93), the lowest 0.00 -> 0.89, bad-4.0 3.3 -> 0.1 %; the
+floor shares there 0.72-0.82, on paper15 0.00-0.06, where nothing moves.
 """
 import numpy as np
 
 __all__ = ["FLOOR_C", "FLOOR_SHARE", "SHIFT", "floor_share", "info_to_user", "model_pair",
-           "to_model_left", "to_model_start", "to_user_left"]
+           "search_range", "to_model_left", "to_model_start", "to_user_left"]
 
 #: Columns each view moves for a pair searched from 0 px.
 SHIFT = 1
@@ -47,6 +47,16 @@ def floor_share(mean: np.ndarray, precision: np.ndarray) -> float:
     confident = precision > 0
     n = int(confident.sum())
     return float((mean[confident] < FLOOR_C).sum()) / n if n else 0.0
+
+
+def search_range(mean: np.ndarray, precision: np.ndarray, zero_floor: bool, c_max: int) -> dict:
+    """Where to search a pair whose first consensus (unmoved grid of ``c_max`` candidates) is
+    ``mean``, ``precision``: ``from_zero`` with ``zero_floor`` and a :func:`floor_share` of at
+    least ``FLOOR_SHARE``; the user's disparities searched, ``[0 or 2, 2 c_max]``."""
+    share = floor_share(mean, precision)
+    low = bool(zero_floor and share >= FLOOR_SHARE)
+    return {"zero_floor": zero_floor, "from_zero": low, "floor_share": share,
+            "disparities": [0.0 if low else 2.0, 2.0 * c_max]}
 
 
 def _columns(image: np.ndarray, move: int) -> np.ndarray:
