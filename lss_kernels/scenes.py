@@ -40,8 +40,8 @@ import numpy as np
 from .io import Scene, save_scene
 from .metrics import BAND_RADIUS, band_from_foreground, boundary_from_foreground
 
-__all__ = ["OUTLINES", "PRESETS", "TEXTURES", "SceneSpec", "disparity_coefficients",
-           "make_scene", "write_scene"]
+__all__ = ["OUTLINES", "PRESETS", "TEXTURES", "SceneSpec", "check_scene",
+           "disparity_coefficients", "make_scene", "write_scene"]
 
 #: Texture kinds and their parameters with defaults (``SceneSpec.texture_fg`` / ``texture_bg``:
 #: a dict with ``"kind"`` and any of these keys).  Lengths are pixels of surface coordinates,
@@ -327,6 +327,25 @@ def _check(spec: SceneSpec, theta_fg, theta_bg, ellipse, pad: int) -> None:
                          "(larger disparity) everywhere inside the outline")
 
 
+def _geometry(spec: SceneSpec) -> tuple:
+    """``(theta_fg, theta_bg, ellipse, pad)`` of a spec, checked (``ValueError`` if it is not
+    a valid two-layer scene)."""
+    w, h = int(spec.width), int(spec.height)
+    theta_fg, theta_bg = _theta(spec.d_fg, "d_fg"), _theta(spec.d_bg, "d_bg")
+    ellipse = tuple(float(v) for v in (spec.ellipse if spec.ellipse is not None
+                                       else (w / 2, h / 2, 0.25 * w, 0.29 * h)))
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    pad = int(math.ceil(max(np.abs(_disparity(t, x, y)).max() for t in (theta_fg, theta_bg)))) + 4
+    _check(spec, theta_fg, theta_bg, ellipse, pad)
+    return theta_fg, theta_bg, ellipse, pad
+
+
+def check_scene(**params) -> None:
+    """Raise ``ValueError`` if :func:`make_scene` ``(None, **params)`` would, without
+    rendering (the geometry of :class:`SceneSpec` keywords)."""
+    _geometry(replace(SceneSpec(), **params))
+
+
 def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene:
     """Render a two-layer scene with exact ground truth.
 
@@ -360,12 +379,8 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
                          f"valid: seed, {', '.join(sorted(names))}")
     spec = replace(SceneSpec(**PRESETS.get(preset, {})), **params)
     w, h = int(spec.width), int(spec.height)
-    theta_fg, theta_bg = _theta(spec.d_fg, "d_fg"), _theta(spec.d_bg, "d_bg")
-    ellipse = tuple(float(v) for v in (spec.ellipse if spec.ellipse is not None
-                                       else (w / 2, h / 2, 0.25 * w, 0.29 * h)))
+    theta_fg, theta_bg, ellipse, pad = _geometry(spec)
     y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-    pad = int(math.ceil(max(np.abs(_disparity(t, x, y)).max() for t in (theta_fg, theta_bg)))) + 4
-    _check(spec, theta_fg, theta_bg, ellipse, pad)
 
     rng = np.random.default_rng(seed)
     box = (-pad, -1.0, w + pad, h + 1.0)

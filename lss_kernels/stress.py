@@ -15,9 +15,12 @@ Examples
 --------
 >>> folders = write_stress_set("/tmp/stress", seed=0, size="small")
 
+:func:`random_specs` draws scenes at random over the generator's dimensions instead (no
+family: what no one thought to test).
+
 Command line::
 
-    python -m lss_kernels.stress OUT [--seed S] [--size small|medium]
+    python -m lss_kernels.stress OUT [--seed S] [--size small|medium] [--random N]
 """
 from __future__ import annotations
 
@@ -27,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .scenes import disparity_coefficients, write_scene
+from .scenes import OUTLINES, check_scene, disparity_coefficients, write_scene
 
-__all__ = ["SIZES", "STRESS_FAMILIES", "stress_specs", "write_stress_set"]
+__all__ = ["SIZES", "STRESS_FAMILIES", "random_specs", "stress_specs", "write_stress_set"]
 
 #: What each family tests.
 STRESS_FAMILIES = {
@@ -261,13 +264,61 @@ def stress_specs(seed: int = 0, size: str = "medium") -> list:
     return specs
 
 
-def write_stress_set(out_dir, seed: int = 0, size: str = "medium") -> list:
-    """Write every scene of :func:`stress_specs` into ``out_dir/NAME``; returns the folders."""
+def _random_scene(rng, width: int, height: int) -> dict:
+    """One draw of :func:`random_specs` (make_scene keywords, maybe not a valid scene)."""
+    cx, cy = rng.uniform(0.25, 0.75) * width, rng.uniform(0.3, 0.7) * height
+    rx, ry = rng.uniform(0.08, 0.25) * width, rng.uniform(0.12, 0.3) * height
+    d_bg = rng.uniform(0.0, 30.0) * width / SIZES["medium"][0]
+    d_fg = d_bg + rng.uniform(3.0, 40.0) * width / SIZES["medium"][0]
+
+    def layer(d, steepest):
+        if rng.random() < 0.5:
+            return d
+        return disparity_coefficients(d, tuple(rng.uniform(-steepest, steepest, 2)),
+                                      centre=(cx, cy))
+    texture = lambda: str(rng.choice(["random", "random", "palette", "low_contrast"]))
+    return dict(width=width, height=height, d_fg=layer(d_fg, 0.06), d_bg=layer(d_bg, 0.04),
+                ellipse=(cx, cy, rx, ry), outline=str(rng.choice(OUTLINES)),
+                texture_fg=texture(), texture_bg=texture(), noise=rng.uniform(0.0, 0.02),
+                init_scale=rng.uniform(0.75, 1.1),
+                init_shift=(rng.uniform(-5.0, 5.0), rng.uniform(-5.0, 5.0)),
+                d_max_step=_D_MAX_STEP)
+
+
+def random_specs(seed: int = 0, count: int = 24, size: str = "medium") -> list:
+    """``count`` scenes drawn at random over the generator's dimensions, as
+    ``(name, keywords)`` like :func:`stress_specs`: the object's place, size and outline
+    (:data:`~lss_kernels.scenes.OUTLINES`), the background at 0-30 px and the object 3-40 px
+    in front (medium pixels), each layer fronto-parallel or slanted, each layer's texture
+    (random, palette or dark and low-contrast), noise of sigma 0-0.02 and a hand ellipse of
+    radii 0.75-1.1 up to 5 px off centre.  Draws that are not a valid scene are drawn again.
+    Names ``random_K``; equal seeds give identical scenes."""
+    if size not in SIZES:
+        raise ValueError(f"size: unknown {size!r}; valid: {', '.join(SIZES)}")
+    rng = np.random.default_rng([int(seed), 1])
+    specs = []
+    while len(specs) < count:
+        keywords = _random_scene(rng, *SIZES[size])
+        try:
+            check_scene(**keywords)
+        except ValueError:
+            continue
+        keywords.update(seed=int(seed) * 1000 + len(specs),
+                        meta={"family": "random", "stress_seed": int(seed), "size": size,
+                              "description": "drawn at random (lss_kernels.stress.random_specs)"})
+        specs.append((f"random_{len(specs):02d}", keywords))
+    return specs
+
+
+def write_stress_set(out_dir, seed: int = 0, size: str = "medium", random: int = 0) -> list:
+    """Write every scene of :func:`stress_specs` (or, with ``random`` > 0, of
+    :func:`random_specs` with that count) into ``out_dir/NAME``; returns the folders."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"out_dir: {out} exists and is not a folder")
     folders = []
-    for name, keywords in stress_specs(seed, size):
+    specs = random_specs(seed, random, size) if random > 0 else stress_specs(seed, size)
+    for name, keywords in specs:
         write_scene(out / name, None, name=name, **keywords)
         folders.append(out / name)
     return folders
@@ -281,7 +332,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def main(argv=None) -> int:
-    """``python -m lss_kernels.stress OUT [--seed S] [--size small|medium]``."""
+    """``python -m lss_kernels.stress OUT [--seed S] [--size small|medium] [--random N]``."""
     parser = _Parser(prog="python -m lss_kernels.stress",
                      description="Write the stress set of hard rendered two-layer scenes "
                                  "(docs/stress.md) as scene folders under OUT.")
@@ -289,14 +340,18 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the set (default 0)")
     parser.add_argument("--size", choices=list(SIZES), default="medium",
                         help="image size: small 160x120, medium 320x240 (default)")
+    parser.add_argument("--random", type=int, default=0, metavar="N",
+                        help="N scenes drawn at random instead of the families")
     args = parser.parse_args(argv)
+    if args.random < 0:
+        parser.error(f"--random: expected a number of scenes >= 0, got {args.random}")
     try:
-        folders = write_stress_set(args.out, args.seed, args.size)
+        folders = write_stress_set(args.out, args.seed, args.size, args.random)
     except (ValueError, OSError) as exc:
         print(f"{parser.prog}: error: {exc}", file=sys.stderr)
         return 1
-    print(f"wrote {len(folders)} scenes ({len(STRESS_FAMILIES)} families, {args.size}, "
-          f"seed {args.seed}) to {args.out}")
+    kind = "random" if args.random else f"{len(STRESS_FAMILIES)} families"
+    print(f"wrote {len(folders)} scenes ({kind}, {args.size}, seed {args.seed}) to {args.out}")
     return 0
 
 

@@ -6,7 +6,7 @@ import pytest
 from lss_kernels import stress
 from lss_kernels.io import list_scenes, load_scene
 from lss_kernels.metrics import score
-from lss_kernels.scenes import make_scene
+from lss_kernels.scenes import OUTLINES, check_scene, make_scene
 
 
 @pytest.fixture(scope="module")
@@ -221,3 +221,40 @@ def test_a_striped_pair_that_looks_sound_under_ad_is_found_by_the_periodicity_ch
     result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse)
     assert result.recovery["periodic"] > 0.5 and result.recovery["first_params"] == PERIODIC
     assert score(result.disparity, result.occlusion, scene)["occ_f1"] >= 0.95
+
+
+def test_random_scenes_are_valid_varied_and_deterministic():
+    specs = stress.random_specs(seed=5, count=24, size="small")
+    assert specs == stress.random_specs(seed=5, count=24, size="small")
+    assert specs != stress.random_specs(seed=6, count=24, size="small")
+    assert [name for name, _ in specs] == [f"random_{k:02d}" for k in range(24)]
+    slanted = lambda d: isinstance(d, tuple) and any(d[:5])
+    kw = [k for _, k in specs]
+    assert {k["outline"] for k in kw} == set(OUTLINES)
+    assert any(slanted(k["d_bg"]) for k in kw) and any(not slanted(k["d_bg"]) for k in kw)
+    assert {"random", "palette", "low_contrast"} <= {k["texture_fg"] for k in kw}
+    assert 0.0 <= min(k["noise"] for k in kw) and max(k["noise"] for k in kw) <= 0.02
+    for name, keywords in specs[:6]:
+        scene = make_scene(None, **{k: v for k, v in keywords.items() if k != "meta"})
+        assert scene.left.shape[:2] == (120, 160) and scene.fg_left.any(), name
+        assert scene.disp_left.min() >= 0, name
+        assert (scene.disp_left[scene.fg_left].min()
+                > np.median(scene.disp_left[~scene.fg_left & ~scene.occ_left])), name
+
+
+def test_check_scene_refuses_what_make_scene_would():
+    check_scene(width=64, height=48, d_fg=12.0, d_bg=4.0)
+    with pytest.raises(ValueError, match="d_bg: disparity must be >= 0"):
+        check_scene(width=64, height=48, d_fg=12.0, d_bg=(0, 0, 0, 0.2, 0, -1.0))
+    with pytest.raises(ValueError, match="in front of the background"):
+        check_scene(width=64, height=48, d_fg=4.0, d_bg=6.0)
+
+
+def test_command_line_random(tmp_path, capsys):
+    assert stress.main([str(tmp_path / "r"), "--size", "small", "--random", "3"]) == 0
+    folders = list_scenes(tmp_path / "r")
+    assert len(folders) == 3 and "random" in capsys.readouterr().out
+    assert load_scene(folders[0]).meta["family"] == "random"
+    with pytest.raises(SystemExit) as exc:
+        stress.main([str(tmp_path / "x"), "--random", "-1"])
+    assert exc.value.code == 2 and "--random" in capsys.readouterr().err
