@@ -446,6 +446,7 @@ class Solver:
                       search=dict(self.search))
 
     def _all_grids(self):
+        """Every grid the solver holds (``_GRID`` names to objects), the current one first."""
         current = [{name: getattr(self, name) for name in _GRID}] if self.pool is not None else []
         return current + list(self._grids.values())
 
