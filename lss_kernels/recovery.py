@@ -29,7 +29,9 @@ cost (it matches dark and low-contrast texture by the order of grey values) and 
 weighted by the distinctness of their cost curves (a periodic texture's patches, whose
 curves have several equally deep minima, send almost none; ``Params.message_ambiguity``).
 The second model is kept when it is sound; otherwise the first stays.  ``Result.recovery``
-records what happened.
+records what happened, and a model kept collapsed warns :class:`CollapsedModelWarning`: its
+output is no two-layer reading of the pair (a layer with too little texture, or texture lost
+in noise, ``docs/stress.md``).
 
 Neither change is the default: on the paper's scenes AD-Census lowers the mean occlusion F1
 from 0.79 to 0.76 and the distinctness weights to 0.76 (``docs/design.md``).
@@ -54,9 +56,9 @@ import numpy as np
 from .model.init import InitError
 from .validate import LUMA
 
-__all__ = ["MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE", "MIN_JUMP", "PERIODIC",
-           "PERIODIC_AREA", "RECOVERY", "ShortRangeWarning", "SwappedViewsWarning",
-           "UnreliableStartWarning", "WARNINGS", "collapse", "layer_offsets", "model_health",
+__all__ = ["CollapsedModelWarning", "MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE",
+           "MIN_JUMP", "PERIODIC", "PERIODIC_AREA", "RECOVERY", "ShortRangeWarning",
+           "SwappedViewsWarning", "UnreliableStartWarning", "WARNINGS", "collapse", "layer_offsets", "model_health",
            "named_warnings", "periodic_fraction", "periodicity", "with_recovery"]
 
 #: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
@@ -193,7 +195,29 @@ class UnreliableStartWarning(UserWarning):
 
 
 #: The library's own warnings, which the commands show every time.
-WARNINGS = (SwappedViewsWarning, ShortRangeWarning, UnreliableStartWarning)
+class CollapsedModelWarning(UserWarning):
+    """The model returned collapsed (:func:`collapse`), and no other solve gave a sound one:
+    the output is no two-layer reading of the pair."""
+
+
+WARNINGS = (SwappedViewsWarning, ShortRangeWarning, UnreliableStartWarning,
+            CollapsedModelWarning)
+
+
+def _kept(result, extra, record):
+    """``(result, extra)`` with ``result.recovery = record``; warns when the model kept is
+    collapsed."""
+    result.recovery = record
+    reason = record["retry_collapse"] if record.get("kept") == "retry" else record["collapse"]
+    if reason is not None:
+        again = ", ".join(f"{k}={v}" for k, v in record.get("retry_params", {}).items())
+        retry = (f"; so did the solve again with {again} "
+                 f"({record.get('retry_collapse') or record.get('retry_error')})"
+                 if record["retried"] else "")
+        warnings.warn(CollapsedModelWarning(
+            f"no sound model: {reason}{retry}; the output is no two-layer reading of the pair "
+            f"(a layer with too little texture, or texture lost in noise?)"), stacklevel=3)
+    return result, extra
 
 
 @contextlib.contextmanager
@@ -288,8 +312,7 @@ def with_recovery(run, params, d_max, left=None, right=None):
     reason = collapse(first)
     record.update(health=first, collapse=reason, retried=False)
     if reason is None or not params.recover or second_params == first_params:
-        result.recovery = record
-        return result, extra
+        return _kept(result, extra, record)
     changed = {k: v for k, v in vars(second_params).items() if getattr(first_params, k) != v}
     record.update(retried=True, retry_params=changed)
     try:
@@ -300,14 +323,11 @@ def with_recovery(run, params, d_max, left=None, right=None):
             second_result, second_extra = run(second_params)
     except InitError as error:         # e.g. auto finds no object in the census consensus
         record.update(retry_error=str(error), kept="first")
-        result.recovery = record
-        return result, extra
+        return _kept(result, extra, record)
     second = model_health(second_result, d_max)
     second_reason = collapse(second)
     record.update(retry_health=second, retry_collapse=second_reason,
                   kept="first" if second_reason else "retry")
     if second_reason is None:
-        second_result.recovery = record
-        return second_result, second_extra
-    result.recovery = record
-    return result, extra
+        return _kept(second_result, second_extra, record)
+    return _kept(result, extra, record)

@@ -1,5 +1,6 @@
 """Collapse of a model recognised without ground truth, and the second solve with AD-Census
 and distinctness-weighted messages."""
+import warnings
 from types import SimpleNamespace
 
 import numpy as np
@@ -98,7 +99,9 @@ def runs(*models):
 
 def test_a_collapsed_model_is_solved_again_with_census_and_the_sound_one_kept():
     run, calls = runs(model(jump=0.1), model(jump=12.0))
-    result, extra = with_recovery(run, Params(), D_MAX)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", recovery.CollapsedModelWarning)   # a sound model kept
+        result, extra = with_recovery(run, Params(), D_MAX)
     assert calls == [Params(), Params().replace(**recovery.RECOVERY)]
     assert extra == 2 and result.recovery["kept"] == "retry"
     assert result.recovery["retry_health"]["jump"] == pytest.approx(12.0)
@@ -122,7 +125,10 @@ def test_a_retry_that_finds_no_start_keeps_the_first():
         if len(calls) == 2:
             raise InitError("init auto: no foreground found")
         return first, 1
-    result, extra = with_recovery(run, Params(), D_MAX)
+    with pytest.warns(recovery.CollapsedModelWarning, match=r"^no sound model: the surfaces "
+                      r"coincide.*; so did the solve again with matching_cost=ad_census, .*"
+                      r"\(init auto: no foreground found\); the output is no two-layer"):
+        result, extra = with_recovery(run, Params(), D_MAX)
     assert result is first and result.recovery["kept"] == "first"
     assert "no foreground found" in result.recovery["retry_error"]
 
@@ -140,7 +146,9 @@ def test_a_sound_retry_is_kept_even_with_a_smaller_jump():
 def test_a_retry_that_is_no_sounder_is_dropped():
     first = model(jump=0.5)
     run, calls = runs(first, model(jump=0.2))
-    result, extra = with_recovery(run, Params(), D_MAX)
+    with pytest.warns(recovery.CollapsedModelWarning, match=r"mean jump 0.50.*so did the "
+                      r"solve again .*mean jump 0.20"):
+        result, extra = with_recovery(run, Params(), D_MAX)
     assert result is first and extra == 1 and result.recovery["kept"] == "first"
     assert result.recovery["retry_collapse"] is not None
 
@@ -152,9 +160,16 @@ def test_a_retry_that_is_no_sounder_is_dropped():
 ])
 def test_no_second_solve_without_need_or_leave(params, first_jump):
     run, calls = runs(model(jump=first_jump), model(jump=12.0))
-    result, _ = with_recovery(run, params, D_MAX)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result, _ = with_recovery(run, params, D_MAX)
     assert len(calls) == 1 and result.recovery["retried"] is False
     assert (result.recovery["collapse"] is None) == (first_jump > 1.0)
+    # a collapsed model kept, also with the recovery off, says so (without a retry clause)
+    said = [str(w.message) for w in caught if w.category is recovery.CollapsedModelWarning]
+    assert len(said) == (first_jump <= 1.0)
+    assert all(m.startswith("no sound model: the surfaces coincide") and "so did" not in m
+               for m in said)
 
 
 def stripes(period, shape=(64, 160), phase=0.0):
