@@ -12,6 +12,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+
 def c_max(d_max) -> int:
     """The cyclopean search range for a left-view ``d_max``: candidates c = 1 ..
     ``ceil(d_max / 2)`` (the authors' disparities ``2 .. d_max``), at least 1.  A pair

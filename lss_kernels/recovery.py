@@ -58,8 +58,9 @@ from .validate import LUMA
 
 __all__ = ["CollapsedModelWarning", "MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE",
            "MIN_JUMP", "PERIODIC", "PERIODIC_AREA", "RECOVERY", "ShortRangeWarning",
-           "SwappedViewsWarning", "UnreliableStartWarning", "WARNINGS", "collapse", "layer_offsets", "model_health",
-           "named_warnings", "periodic_fraction", "periodicity", "with_recovery"]
+           "SwappedViewsWarning", "UnreliableStartWarning", "WARNINGS", "collapse",
+           "layer_offsets", "model_health", "named_warnings", "periodic_fraction",
+           "periodicity", "with_recovery"]
 
 #: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
 MIN_JUMP = 1.0
@@ -208,8 +209,8 @@ def _kept(result, extra, record):
     """``(result, extra)`` with ``result.recovery = record``; warns when the model kept is
     collapsed."""
     result.recovery = record
-    reason = record["retry_collapse"] if record.get("kept") == "retry" else record["collapse"]
-    if reason is not None:
+    reason = None if record.get("kept") == "retry" else record["collapse"]   # a retry is kept
+    if reason is not None:                                                # only when sound
         again = ", ".join(f"{k}={v}" for k, v in record.get("retry_params", {}).items())
         retry = (f"; so did the solve again with {again} "
                  f"({record.get('retry_collapse') or record.get('retry_error')})"
