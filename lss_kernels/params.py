@@ -60,6 +60,13 @@ class Params:
         ``min_iterations`` count towards it: the rule can fire at ``min_iterations``.
     phi_scale : float
         phi is a signed distance (in pixels) times this factor (the release: 0.01).
+    narrow_band : float
+        Eq. 2 moves phi only within this many pixels of the boundary (|phi| <=
+        ``narrow_band * phi_scale``); 0: everywhere, as the paper's delta_eps does, whose
+        tail lets a weak, noisy data term open holes far inside a region
+        (:mod:`lss_kernels.model.levelset`).  Half a pixel beyond a whole number: the
+        re-initialised phi is ``phi_scale`` times whole-pixel distances, which would sit on
+        the band's edge.
     curvature_sigma : float
         Sigma of the Gaussian-derivative filters for curvature and normal (pixels).
     curvature_clip : float
@@ -143,6 +150,7 @@ class Params:
     stop_fraction: float = 0.002
     stop_patience: int = 2
     phi_scale: float = 0.01
+    narrow_band: float = 10.5
     curvature_sigma: float = 4.0
     curvature_clip: float = 10.0
     boundary_clip: float = 1.0
@@ -194,6 +202,7 @@ class Params:
         need("stop_fraction", lambda v: nonneg(v) and v < 1, "a number in [0, 1)")
         need("stop_patience", posint, "an integer >= 1")
         need("phi_scale", pos, "a finite number > 0")
+        need("narrow_band", nonneg, "a finite number of pixels >= 0 (0: no band)")
         need("curvature_sigma", lambda v: pos(v) and v <= 16, "a number in (0, 16]")
         need("curvature_clip", pos, "a finite number > 0")
         need("boundary_clip", pos, "a finite number > 0")

@@ -836,16 +836,23 @@ def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
     _compare_derivatives(ls, phi)
     ls.boundary_weight(given_b, shapes)
     np.testing.assert_array_equal(ls.extent.image(ls.b_map), b_map)
-    ls._step(cost, C, shapes, occ, p.dt, p.mu)
     kappa, n_x, n_y = ref.curvature(ref.gaussian_derivatives(phi.astype(np.float64),
                                                              p.curvature_sigma),
                                     p.curvature_clip)
     b_x, b_y = ref.gaussian_derivatives(b_map.astype(np.float64), p.curvature_sigma)[:2]
-    want = ref.levelset_step(phi, volume, th1, th2, dtheta, b_map, b_x, b_y, kappa, n_x, n_y,
-                             p.dt, p.mu, p.boundary_clip)
-    got = ls.extent.image(ls.phi_next)
-    assert np.abs(got - phi).max() > 0.05          # the step moves phi
-    np.testing.assert_allclose(got, want, atol=1e-5)
+    band = 1.0                                     # phi spans about -2 .. 2.4
+    for width in (0.0, band):
+        ls._step(cost, C, shapes, occ, p.dt, p.mu, width)
+        want = ref.levelset_step(phi, volume, th1, th2, dtheta, b_map, b_x, b_y, kappa, n_x,
+                                 n_y, p.dt, p.mu, p.boundary_clip, width)
+        got = ls.extent.image(ls.phi_next)
+        assert np.abs(got - phi).max() > 0.05      # the step moves phi
+        np.testing.assert_allclose(got, want, atol=1e-5)
+    # outside the band phi is kept exactly, inside it moves as without a band
+    outside = np.abs(phi) > band
+    assert 0.2 < outside.mean() < 0.8
+    np.testing.assert_array_equal(got[outside], phi[outside])
+    assert np.abs(got - phi)[~outside].min() > 0
     ls.destroy()
     pool.destroy()
 

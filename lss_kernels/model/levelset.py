@@ -5,8 +5,15 @@
 
     D(x, y) = H(phi) Theta_1(x, y) + (1 - H(phi)) Theta_2(x, y)                      (Eq. 3)
 
-with delta_eps(phi) = (1/pi) / (1 + phi^2), kappa = div(grad phi / |grad phi|) and
-N = grad phi / |grad phi|.  Derivatives are separable Gaussian-derivative filters
+with delta_eps(phi) = (1/pi) / (1 + phi^2) inside a narrow band around the boundary (|phi| <=
+``narrow_band`` pixels times ``phi_scale``) and 0 outside it, kappa = div(grad phi / |grad phi|)
+and N = grad phi / |grad phi|.  phi being ``phi_scale`` (0.01) times a distance, delta_eps alone
+falls only to half its peak 100 px from the boundary: every pixel of the image moves, and where
+the data term is weak and noisy (a dark, low-contrast layer) its small imbalances add up over
+hundreds of iterations until the sign flips far inside a region, opening holes in an object
+that no boundary ever reached.  Inside the band the step is the paper's; outside it phi keeps
+its value (a narrow-band level set, Adalsteinsson and Sethian 1995), so regions change only by
+moving their boundary.  Derivatives are separable Gaussian-derivative filters
 (``curvature_sigma``, symmetric borders: the Neumann condition of Eq. 2;
 :mod:`lss_kernels.kernels.filters`); kappa is clipped to +-``curvature_clip`` and the boundary
 term to +-``boundary_clip``.  M is the size-3 patch cost (level 1 of the hierarchy) read with
@@ -203,10 +210,11 @@ class LevelSet:
 
     @ti.kernel
     def _step(self, cost: ti.template(), C: ti.template(), shapes: ti.template(),
-              occ: ti.template(), dt: ti.f32, mu: ti.f32):
+              occ: ti.template(), dt: ti.f32, mu: ti.f32, band: ti.f32):
         """phi_next from phi by Eq. 2, a block of pixels at a time: the boundary term for the
         whole block (grad B is the column pass of the separable filters, whose row pass ran
-        in :meth:`boundary_weight`), then each pixel's data term."""
+        in :meth:`boundary_weight`), then each pixel's data term; phi where |phi| > ``band``
+        (> 0; 0: no band) is kept."""
         clip = self.boundary_clip
         L = ti.static(self.lanes)
         width = self.extent.width()
@@ -231,6 +239,8 @@ class LevelSet:
                         m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x], theta_2[lane], C,
                                            width)
                         dirac = (1.0 / math.pi) / (1.0 + p * p)
+                        if band > 0 and ti.abs(p) > band:
+                            dirac = 0.0
                         self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt[lane])
 
     # ---------------------------------------------------------------- re-initialisation, stopping
@@ -286,7 +296,8 @@ class LevelSet:
     def evolve(self, cost, c_max, shapes, occ, params, reinit):
         """One descent step of Eq. 2, then (every ``reinit_every``) the signed-distance
         re-initialisation and the median filter (:meth:`settle`)."""
-        self._step(cost, c_max, shapes, occ, params.dt, params.mu)
+        self._step(cost, c_max, shapes, occ, params.dt, params.mu,
+                   params.narrow_band * params.phi_scale)
         if reinit:
             self.reinitialise(self.phi_next)
         self.settle(shapes)

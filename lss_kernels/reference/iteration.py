@@ -216,7 +216,8 @@ def iteration(state: IterationState, params):
 
     # levelset: Eq. 2, re-initialisation, median, Eq. 3
     phi_next = ref.levelset_step(phi, state.costs[0], th1, th2, delta_theta, b, b_x, b_y,
-                                 kappa, nx, ny, p.dt, p.mu, p.boundary_clip)
+                                 kappa, nx, ny, p.dt, p.mu, p.boundary_clip,
+                                 p.narrow_band * p.phi_scale)
     if it % p.reinit_every == 0:
         phi_next = ref.reinitialise(phi_next, p.phi_scale)
     phi_new = ref.median_filter(phi_next, p.median_size)

@@ -321,15 +321,19 @@ def boundary_weight(b_occ, edge_left, edge_right, c, alpha):
 
 
 def levelset_step(phi, cost1, theta1_map, theta2_map, dtheta, b_map, b_x, b_y, kappa, n_x,
-                  n_y, dt, mu, clip):
+                  n_y, dt, mu, clip, band=0.0):
     """Eq. 2: phi + dt delta(phi) [-M(x, Theta_1) + M(x - delta_theta, Theta_2)
-    + mu clip(B kappa + N . grad B)], with delta(phi) = (1/pi) / (1 + phi^2)."""
+    + mu clip(B kappa + N . grad B)], with delta(phi) = (1/pi) / (1 + phi^2) where
+    |phi| <= ``band`` (every pixel for ``band`` 0) and 0 elsewhere."""
     H, W = phi.shape
     x = np.broadcast_to(np.arange(W, dtype=np.float64), (H, W))
     m1 = interp_volume(cost1, x, theta1_map)
     m2 = interp_volume(cost1, x - dtheta, theta2_map)
     bt = np.clip(b_map * kappa + n_x * b_x + n_y * b_y, -clip, clip)
-    return phi + dt * (1 / np.pi) / (1 + phi ** 2) * (-m1 + m2 + mu * bt)
+    dirac = (1 / np.pi) / (1 + phi ** 2)
+    if band > 0:
+        dirac = np.where(np.abs(phi) > band, 0.0, dirac)
+    return phi + dt * dirac * (-m1 + m2 + mu * bt)
 
 
 def squared_distance(features):
