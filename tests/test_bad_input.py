@@ -329,6 +329,8 @@ def test_parse_init_reads_ellipses_and_masks(tmp_path):
     ("max_iterations", True, r"an integer >= 1"),
     ("stop_fraction", 1.0, r"a number in \[0, 1\)"),
     ("stop_patience", 0, r"an integer >= 1"),
+    ("narrow_band", -1.0, r"a finite number of pixels >= 0 \(0: no band\)"),
+    ("narrow_band", float("inf"), r"a finite number of pixels >= 0 \(0: no band\)"),
     ("subpixel_messages", 1, r"True or False"),
     ("median_size", 4, r"1, 3, 5 or 7"),
     ("patch_sizes", (3, 8), r"a tuple of increasing integers >= 2, each a multiple of the "
