@@ -195,12 +195,12 @@ class UnreliableStartWarning(UserWarning):
     (:mod:`lss_kernels.model.init`)."""
 
 
-#: The library's own warnings, which the commands show every time.
 class CollapsedModelWarning(UserWarning):
     """The model returned collapsed (:func:`collapse`), and no other solve gave a sound one:
     the output is no two-layer reading of the pair."""
 
 
+#: The library's own warnings, which the commands show every time.
 WARNINGS = (SwappedViewsWarning, ShortRangeWarning, UnreliableStartWarning,
             CollapsedModelWarning)
 
@@ -209,8 +209,9 @@ def _kept(result, extra, record):
     """``(result, extra)`` with ``result.recovery = record``; warns when the model kept is
     collapsed."""
     result.recovery = record
-    reason = None if record.get("kept") == "retry" else record["collapse"]   # a retry is kept
-    if reason is not None:                                                # only when sound
+    # a retry is kept only when it is sound; anything else kept is the first model
+    reason = None if record.get("kept") == "retry" else record["collapse"]
+    if reason is not None:
         again = ", ".join(f"{k}={v}" for k, v in record.get("retry_params", {}).items())
         retry = (f"; so did the solve again with {again} "
                  f"({record.get('retry_collapse') or record.get('retry_error')})"

@@ -848,7 +848,7 @@ def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
         got = ls.extent.image(ls.phi_next)
         assert np.abs(got - phi).max() > 0.05      # the step moves phi
         np.testing.assert_allclose(got, want, atol=1e-5)
-    # outside the band phi is kept exactly, inside it moves as without a band
+    # outside the band phi is kept exactly, inside it moves
     outside = np.abs(phi) > band
     assert 0.2 < outside.mean() < 0.8
     np.testing.assert_array_equal(got[outside], phi[outside])
