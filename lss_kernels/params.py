@@ -129,6 +129,12 @@ class Params:
         Correct the right view to the left one's photometry (a gain, a radial vignetting and
         an offset fitted at the pair's matches) before the costs, where the views differ and
         that model explains the difference (:mod:`lss_kernels.photometry`).
+    background_sweep : float
+        Margin of the background's plane sweep (:mod:`lss_kernels.model.sweep`): Theta_2
+        becomes the fronto-parallel plane that minimises the visible background's mean
+        standardised matching cost when that mean lies more than this below the fitted
+        Theta_2's (a background too dark or too weakly textured for the consensus to place
+        it).  0: Theta_2 is always the Eq. 8 fit, as in the paper.
     zero_floor : bool
         Search a pair from 0 px when its first consensus puts at least 15 % of its confident
         pixels below 4 px (a far background), else from 2 px as the authors' grid does
@@ -169,6 +175,7 @@ class Params:
     recover: bool = True
     photometric: bool = True
     zero_floor: bool = True
+    background_sweep: float = 0.05
 
     def __post_init__(self):
         self.validate()
@@ -189,6 +196,7 @@ class Params:
             need(name, nonneg, "a finite number >= 0")
         need("mu", nonneg, "a finite number >= 0")
         need("beta", nonneg, "a finite number >= 0")
+        need("background_sweep", nonneg, "a finite number >= 0")
         need("patch_sizes", lambda v: isinstance(v, tuple) and len(v) >= 1
              and all(isinstance(s, int) and not isinstance(s, bool) and s >= 2 for s in v)
              and all(b % a == 0 and b > a for a, b in zip(v, v[1:])),

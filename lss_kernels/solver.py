@@ -8,14 +8,14 @@ One iteration (as in the authors' release, with everything a data-parallel kerne
 3. patch messages d_p, sigma_p (Eq. 5; no |c - D| prior and all patches valid at iteration 1);
 4. downward pass: the consensus (Eq. 7);
 5. Theta_1 over phi >= 0 and Theta_2 over the visible background, by the hierarchical
-   normal-equation reduction (Eq. 8);
+   normal-equation reduction (Eq. 8), then the background's plane sweep (model/sweep.py);
 6. delta_theta for the new Theta (the ray cast of Sec. 2);
 7. the Eq. 2 step of phi, then (every ``reinit_every``) signed-distance re-initialisation and
    the median filter;
 8. D = H(phi) Theta_1 + (1 - H(phi)) Theta_2 (Eq. 3), written by the median's last pass.
 
 The host reads two integers per iteration (flipped pixels and foreground area) for the stopping
-rule; nothing else leaves the device inside the loop.
+rule, and ``c_max + 2`` numbers per sweep; nothing else leaves the device inside the loop.
 """
 import time
 
@@ -39,6 +39,7 @@ from .params import Params, c_max
 from .photometry import equalise
 from .result import Result
 from .model.shapes import GlobalShapes
+from .model.sweep import BackgroundSweep
 from .model.start import cyclopean_start
 from .stopping import StopRule
 
@@ -46,7 +47,7 @@ __all__ = ["Result", "Solver", "solve"]
 
 #: What a solver holds per disparity grid (:meth:`Solver._use`).
 _GRID = ("c_max", "pool", "extent", "left", "right", "matching", "hierarchy", "messages",
-         "costs", "shapes", "initialiser", "occ", "levelset", "refinement")
+         "costs", "shapes", "sweep", "initialiser", "occ", "levelset", "refinement")
 
 
 @ti.data_oriented
@@ -134,6 +135,7 @@ class Solver:
                                  self.params.message_ambiguity)
         self.costs = BoundaryCosts(pool, H, W, C)
         self.shapes = GlobalShapes(pool, H, W)
+        self.sweep = BackgroundSweep(pool, H, W, C)
         self.initialiser = InitialRegion(pool, H, W)
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, self.params)
@@ -184,6 +186,7 @@ class Solver:
             self._load_pair(left, right, SHIFT)
             self._first_consensus()
         self.costs.build(self.hierarchy.matching_cost, self.left, self.right, self.params)
+        self.sweep.standardise(self.hierarchy.matching_cost)
         ti.sync()
         self.timings = {"setup_costs": time.perf_counter() - t0}
         self.timings.update({s: 0.0 for s in STAGES})
@@ -309,6 +312,8 @@ class Solver:
         if first and p.exclusive_fit:
             # the first fits had no shapes to exclude rows by: fit again with both
             self.shapes.fit(self, hier.consensus_mean)
+        plane = self.sweep.run(self.iteration, p, hier.matching_cost, self.shapes, ls.phi,
+                               self.occ.phi_plus, hier.consensus_mean)
         t = self._stage("shapes", t)
         self.occ.compute(self.shapes, ls.phi_x, 1)
         t = self._stage("occlusion", t)
@@ -318,8 +323,7 @@ class Solver:
         # the median's last pass also writes D (Eq. 3) from the new phi
         ls.evolve(hier.matching_cost, self.c_max, self.shapes, self.occ, p, reinit)
         t = self._stage("levelset", t)
-        flipped = int(ls.flipped[None])
-        area = int(ls.area[None])
+        flipped, area = int(ls.flipped[None]), int(ls.area[None])
         seconds = time.perf_counter() - t_iter
         self._t_loop += seconds
         if self._rule.is_window_end(self.iteration):
@@ -328,7 +332,8 @@ class Solver:
             self._rule.record(self._moving)
         moving = self._moving
         stats = dict(iteration=self.iteration, flipped=flipped, moving_fraction=moving,
-                     fg_fraction=area / float(self.H * self.W), seconds=seconds)
+                     fg_fraction=area / float(self.H * self.W), seconds=seconds,
+                     background_plane=None if plane is None else 2.0 * plane - self.offset)
         self.history.append(stats)
         self._check_stop(area, moving)
         return stats

@@ -331,6 +331,8 @@ def test_parse_init_reads_ellipses_and_masks(tmp_path):
     ("stop_patience", 0, r"an integer >= 1"),
     ("narrow_band", -1.0, r"a finite number of pixels >= 0 \(0: no band\)"),
     ("narrow_band", float("inf"), r"a finite number of pixels >= 0 \(0: no band\)"),
+    ("background_sweep", -0.05, r"a finite number >= 0"),
+    ("background_sweep", float("nan"), r"a finite number >= 0"),
     ("subpixel_messages", 1, r"True or False"),
     ("median_size", 4, r"1, 3, 5 or 7"),
     ("patch_sizes", (3, 8), r"a tuple of increasing integers >= 2, each a multiple of the "

@@ -906,3 +906,84 @@ def test_median_filter_matches_numpy_with_ties_and_borders(fresh_taichi):
     rng = np.random.default_rng(12)
     a = np.round(rng.standard_normal((H, W)) * 2).astype(np.float32)
     np.testing.assert_array_equal(_median_of(a, 7), ref.median_filter(a, 7))
+
+
+def test_background_sweep_matches_reference(ti_arch):
+    """The background's plane sweep (per-pixel standardised cost curves summed over the
+    visible background, pixels near Theta_1 left out) against the float64 reference: the
+    per-candidate sums and their count, the mean at the fitted Theta_2, and the plane it
+    chooses; a faint dip at c = 3 under noise wins over a Theta_2 fitted at 5.5, a margin
+    larger than the dip keeps Theta_2."""
+    from lss_kernels.model.shapes import GlobalShapes
+    from lss_kernels.model.sweep import NEAR, BackgroundSweep
+    rng = np.random.default_rng(41)
+    pool = FieldPool()
+    shapes = GlobalShapes(pool, H, W)
+    sweep = BackgroundSweep(pool, H, W, C)
+    ext = sweep.extent
+    cost = pool.field(ti.f32, ext.bucket + (C,), volume=True)
+    phi, phi_plus, cons = (pool.field(ti.f32, ext.bucket, bucket=True) for _ in range(3))
+    pool.finalize()
+    theta = np.array([[0.3, 0.0, -0.2, 0.4, 0.1, 5.0], [0.0, 0.2, 0.0, -0.3, 0.0, 5.5]])
+    shapes.set(theta[0], theta[1])
+    y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+    th1, th2 = (ref.shape_value(t.astype(np.float32), x, y, (H, W)) for t in theta)
+    volume = rng.random((H, W, C)) * 0.05 + 0.3
+    volume[:, :, 2] -= 0.01                     # the background's faint dip at c = 3
+    volume[3, 4, :] = 0.2                       # a flat curve: no vote
+    phi_np = rng.uniform(-1, 1, (H, W))
+    phi_plus_np = rng.uniform(-1, 1, (H, W))
+    cons_np = th1 + rng.uniform(-4, 4, (H, W))
+    for f, a in ((cost, volume), (phi, phi_np), (phi_plus, phi_plus_np), (cons, cons_np)):
+        f.from_numpy(ext.padded(a.astype(np.float32)))
+    volume, phi_np, phi_plus_np, cons_np = (a.astype(np.float32).astype(np.float64) for a in
+                                            (volume, phi_np, phi_plus_np, cons_np))
+    sweep.standardise(cost)
+    sd = volume.std(axis=2)
+    z = (volume - volume.mean(axis=2, keepdims=True)) / np.where(sd > 0, sd, 1)[..., None]
+    z[sd == 0] = 0.0
+    sel = (phi_np < 0) & (phi_plus_np < 0) & (np.abs(cons_np - th1) >= NEAR)
+    assert 0.1 < sel.mean() < 0.3
+    sweep._select(cost, shapes, phi, phi_plus, cons, NEAR)
+    sweep._accumulate(cost)
+    sweep._reduce()
+    totals = sweep.totals.to_numpy()
+    assert totals[C + 1] == sel.sum()
+    np.testing.assert_allclose(totals[:C], z[sel].sum(axis=0), atol=1e-3)
+    visible = (phi_np < 0) & (phi_plus_np < 0)
+    from lss_kernels.reference.sweep import background_sweep
+    want = background_sweep(volume, visible, th1, th2, cons_np, 0.05)
+    assert want is not None and abs(want - 3.0) < 0.5
+    assert sweep.decide(totals.astype(np.float64), 0.05) == pytest.approx(want, abs=1e-3)
+    assert background_sweep(volume, visible, th1, th2, cons_np, 5.0) is None
+    due = lambda it, margin: sweep.run(it, Params(background_sweep=margin), cost, shapes, phi,
+                                       phi_plus, cons)
+    assert due(1, 5.0) is None and due(11, 0.05) is None and due(3, 0.0) is None
+    np.testing.assert_allclose(shapes.theta.to_numpy(), theta, atol=1e-6)
+    got = due(20, 0.05)
+    assert got == pytest.approx(want, abs=1e-3)
+    np.testing.assert_allclose(shapes.theta.to_numpy()[1], [0, 0, 0, 0, 0, got], atol=1e-6)
+    np.testing.assert_allclose(shapes.theta.to_numpy()[0], theta[0], atol=1e-6)
+    pool.destroy()
+
+
+def test_plane_vertex_of_a_parabola_and_at_the_ends():
+    from lss_kernels.model.sweep import plane_vertex
+    c = np.arange(1, 8, dtype=np.float64)
+    mean = (c - 3.3) ** 2
+    assert plane_vertex(mean, int(np.argmin(mean))) == pytest.approx(3.3)
+    assert plane_vertex(mean[::-1].copy(), 6) == 7.0           # the last candidate
+    assert plane_vertex(np.array([1.0, 0.0, 5.0]), 0) == 1.0    # the first candidate
+    assert plane_vertex(np.array([1.0, 1.0, 1.0]), 1) == 2.0    # flat: no vertex
+
+
+def test_a_broad_bowl_is_no_distinct_dip():
+    """A slanted background sweeps to a broad bowl (paper15 scene 2: 25 of 60 candidates
+    below half its depth), a background near one plane to a narrow dip."""
+    from lss_kernels.model.sweep import distinct_dip
+    c = np.arange(1, 61, dtype=np.float64)
+    bowl = 1.0 - np.exp(-((c - 40) / 25.0) ** 2)
+    dip = np.where(np.abs(c - 12) <= 1, -1.0, 0.0)
+    assert not distinct_dip(bowl, int(np.argmin(bowl)))
+    assert distinct_dip(dip, 11)
+    assert distinct_dip(np.array([0.0, -1.0, 0.0, 0.1]), 1)     # small ranges: 2 candidates

@@ -156,3 +156,32 @@ def test_a_single_patch_level_matches_the_specification(fresh_taichi, width):
     if width == 56:
         _check(kernel, spec)
     solver.close()
+
+
+def test_the_background_sweep_sets_the_same_plane(fresh_taichi):
+    """A textured object 11 px in front of a dark background of 8 grey levels under noise,
+    the start inside the object: the first iteration's plane sweep sets Theta_2 to the same
+    plane in the kernels and the specification, and phi moves alike.  The start's centre lies
+    off the pixel grid's columns: on a column of mirror symmetry phi's x-derivative is at
+    round-off level, its sign (the ray cast's direction) that of round-off, and the plane's
+    jump, unlike a surface fitted over the object, is cast there."""
+    from lss_kernels.scenes import make_scene
+    from lss_kernels.solver import Solver
+    scene = make_scene(None, seed=0, width=96, height=72, d_fg=14.0, d_bg=3.0,
+                       ellipse=(48, 36, 18, 15), texture_fg="random",
+                       texture_bg="low_contrast", noise=0.012, init_scale=0.8,
+                       init_shift=(0.21, -0.11))
+    solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=PARAMS)
+    start = npi.state_from_solver(solver)
+    solver.step()
+    kernel = npi.state_from_solver(solver)
+    spec, _ = npi.iteration(start, PARAMS)
+    plane = spec.extra["plane"]
+    assert plane is not None and abs(2 * plane - solver.offset - 3.0) < 1.0
+    assert solver.history[-1]["background_plane"] == pytest.approx(2 * plane - solver.offset,
+                                                                   abs=2e-3)
+    np.testing.assert_allclose(kernel.theta[1], [0, 0, 0, 0, 0, plane], atol=1e-3)
+    assert np.abs(kernel.theta - spec.theta).max() < 1e-3 * max(1.0, np.abs(spec.theta).max())
+    assert np.abs(kernel.phi - start.phi).max() > 1e-3          # the step moved phi
+    assert np.abs(kernel.phi - spec.phi).max() < 2e-5
+    solver.close()

@@ -27,6 +27,24 @@ def test_recovers_the_boundary_of_an_easy_scene(easy):
     assert result.theta_bg[5] == pytest.approx(8.0, abs=0.5)
 
 
+def test_background_sweep_planes_lie_on_the_background(easy):
+    """The easy scene's textured background at 8 px is fronto-parallel: the first iteration's
+    plane explains it better than the first fit and is set; every plane the sweep set lies
+    at the background's disparity, and ``summary.json`` counts them."""
+    from lss_kernels.apps.jobs import _sweep_summary
+    scene, result = easy
+    planes = [(s["iteration"], s["background_plane"]) for s in result.history
+              if s["background_plane"] is not None]
+    assert planes and planes[0][0] == 1 and all(abs(d - 8.0) < 0.5 for _, d in planes)
+    assert all(it <= 10 or it % 10 == 0 for it, _ in planes)
+    summary = _sweep_summary(result.history)
+    assert summary["planes_set"] == len(planes)
+    assert summary["last"] == (None if not planes else
+                               {"iteration": planes[-1][0], "disparity": round(planes[-1][1], 3)})
+    assert _sweep_summary([{"iteration": 1, "background_plane": None}]) == {"planes_set": 0,
+                                                                           "last": None}
+
+
 def test_result_maps_are_finite_and_consistent(easy):
     scene, result = easy
     H, W = scene.left.shape[:2]
@@ -115,8 +133,8 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     m = [lev.margin for lev in solver.hierarchy.levels]
     margins = sum(4 * ((H + 2 * k) * (W + 2 * k) - H * W) * solver.c_max for k in m)
     # 2-D fields: 64 for the model's maps, 5 per level for the message cache (key, the two
-    # candidates' costs and refined positions)
-    planes = (64 + 5 * levels) * H * W * 4
+    # candidates' costs and refined positions), 4 for the plane sweep and its per-row sums
+    planes = (68 + 5 * levels) * H * W * 4 + (H + 1) * (solver.c_max + 2) * 4
     # the three row-filtered scratch planes of the separable filters carry half-width
     # margin rows above and below; they, phi's four derivative planes and the message
     # caches are lane planes, whose rows are padded to whole blocks of lanes

@@ -158,7 +158,7 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
             unknown = np.full(scene.left.shape[:2], np.inf, np.float32)
             extra = {"iterations": 0, "stop_reason": f"no start: {error}", "error": str(error),
                      "recovered": False, "periodic": False, "photometric": False,
-                     "from_zero": False,
+                     "from_zero": False, "background_planes": 0,
                      "bad4_surface": 100.0}
             return unknown, np.zeros(unknown.shape, bool), extra, 0.0
         extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason),
@@ -166,6 +166,8 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
                  "periodic": "first_params" in result.recovery,
                  "photometric": bool(result.photometry.get("correct")),
                  "from_zero": bool(result.search.get("from_zero")),
+                 "background_planes": sum(s.get("background_plane") is not None
+                                          for s in result.history),
                  "bad4_surface": float(metrics.score(result.surface, result.occlusion,
                                                      scene)["bad4"])}
         if trace:

@@ -165,6 +165,16 @@ def _jsonable(value):
     return value
 
 
+def _sweep_summary(history):
+    """How often the background's plane sweep set Theta_2 (:mod:`lss_kernels.model.sweep`),
+    and its last plane (iteration, left-view disparity)."""
+    planes = [(s["iteration"], s["background_plane"]) for s in history
+              if s.get("background_plane") is not None]
+    last = (None if not planes else
+            dict(iteration=planes[-1][0], disparity=round(float(planes[-1][1]), 3)))
+    return dict(planes_set=len(planes), last=last)
+
+
 def write_outputs(out_dir, result, left, params, extra=None, initial=None):
     """Write the result files into ``out_dir`` atomically (a temporary sibling folder, then
     renamed into place); returns the summary.  ``initial``: the initial foreground (left
@@ -194,6 +204,7 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None):
                                        passes=[list(p) for p in params.refine_passes],
                                        ratio=params.refine_ratio,
                                        seconds=round(result.timings.get("refine", 0.0), 4)),
+                       background_sweep=_sweep_summary(result.history),
                        params=params.to_dict())
         summary.update(extra or {})
         with open(os.path.join(tmp, "summary.json"), "w") as f:

@@ -8,6 +8,8 @@
 ``messages``       per-patch validity and disparity messages (Eqs. 4, 5)
 ``shapes``         the quadratic surfaces Theta_1, Theta_2 by a hierarchical reduction of the
                    normal equations (Eq. 8)
+``sweep``          the background's plane sweep: Theta_2 placed by the background's own
+                   cost where Eq. 8's fit cannot place it
 ``occlusion``      delta_theta by the ray cast in x-d space, the visible background, the
                    left-view rendering (Sec. 2)
 ``levelset``       phi, its descent step (Eq. 2), re-initialisation and D (Eq. 3)

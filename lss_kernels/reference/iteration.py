@@ -20,7 +20,9 @@ The stages and their order are those of the solver (``solver.STAGES``):
     Eq. 8: Theta_1 over phi >= 0 and Theta_2 over the visible background (phi < 0 and
     phi_+ < 0), weighted least squares (:func:`numpy.linalg.lstsq`) of the consensus mean with
     weights (1/sigma^2) ** ``shape_weight_power``; a region with fewer than 6 weighted rows, or
-    a rank-deficient system, keeps its previous shape.
+    a rank-deficient system, keeps its previous shape.  Then, in the first ``reinit_every``
+    iterations and at every re-initialisation, the background's plane sweep (Theta_2 may
+    become a fronto-parallel plane).
 ``occlusion``
     delta_theta by the ray cast of Sec. 2 (fixed-point iteration on
     ``t = Theta_1(x) - Theta_2(x - s t)``, ``s = sign(dphi/dx)``), and phi(x + delta_theta).
@@ -53,6 +55,7 @@ import numpy as np
 
 from ..model import FIXED_POINT_STEPS, STAGES
 from . import kernels as ref
+from .sweep import background_sweep
 
 __all__ = ["IterationState", "STAGES", "iteration", "run", "state_from_solver"]
 
@@ -132,7 +135,8 @@ def iteration(state: IterationState, params):
         ``phi``, ``D``, ``delta_theta``, ``theta`` and ``iteration`` updated; ``extra`` holds
         ``consensus_mean`` and ``precision`` ``(H, W)`` (cyclopean units, 1/sigma^2), ``d_p``,
         ``sigma_p``, ``valid`` (lists per level), ``phi_plus``, ``updated`` (which shapes were
-        refitted), ``flipped`` and ``area``.
+        refitted), ``plane`` (the sweep's Theta_2 plane, cyclopean, or None), ``flipped`` and
+        ``area``.
     seconds : dict
         Wall-clock seconds per stage (keys :data:`STAGES`).
     """
@@ -195,6 +199,13 @@ def iteration(state: IterationState, params):
         theta[j], ok = ref.fit_shape(wj, mean, theta[j])
         updated.append(ok)
     fitted = tuple(bool(f or u) for f, u in zip(state.fitted, updated))
+    plane = None
+    if p.background_sweep > 0 and (it <= p.reinit_every or it % p.reinit_every == 0):
+        plane = background_sweep(state.costs[0], (phi < 0) & (phi_plus < 0),
+                                 theta_map(theta[0]), theta_map(theta[1]), mean,
+                                 p.background_sweep)
+        if plane is not None:
+            theta[1] = (0.0, 0.0, 0.0, 0.0, 0.0, plane)
     now = time.perf_counter()
     seconds["shapes"], t = now - t, now
 
@@ -227,7 +238,8 @@ def iteration(state: IterationState, params):
     seconds["levelset"] = time.perf_counter() - t
 
     extra = dict(consensus_mean=mean, precision=precision, d_p=d_p, sigma_p=sigma_p,
-                 valid=valid, phi_plus=phi_plus, updated=updated, flipped=flipped, area=area)
+                 valid=valid, phi_plus=phi_plus, updated=updated, plane=plane, flipped=flipped,
+                 area=area)
     return replace(state, phi=phi_new, D=D, delta_theta=delta_theta, theta=theta, fitted=fitted,
                    iteration=it, extra=extra), seconds
 

@@ -1,0 +1,211 @@
+"""The background's plane sweep: Theta_2 chosen by the energy's background term itself where
+the consensus cannot place it.
+
+Eq. 8 fits Theta_2 to the consensus d-bar weighted by its precision.  On a dark or
+low-contrast background whose texture is lost in noise, every patch's cost curve is shallow
+under the hierarchy's one min-max scale per level, so the background pixels carry almost no
+weight (and, from the second iteration on, their messages echo the ``beta |c - D|`` prior):
+the fit is then decided by the few confident pixels outside the boundary -- the part of the
+object that the start does not cover, and the halo where large patches straddle it -- and
+Theta_2 lands on the object.  The two layers coincide, nothing drives phi, and the
+foreground vanishes (``python -m lss_kernels.stress --random 24``, seeds 1 and 2: of their
+ten scenes with such a background, six are lost or bent, four of them at occlusion F1 0).
+
+The signal is there when summed over the whole background: the mean matching cost of the
+visible background, as a function of one disparity, dips by about 6 % at the true one.  So
+the sweep evaluates Eq. 1's background term over the visible background, Theta_2 held
+fronto-parallel at each candidate c = 1 .. c_max, with each pixel's cost curve standardised
+(``z(c) = (M(c) - mean_c M) / std_c M``): every pixel has one vote of the same weight, and
+the few textured pixels of the object that lie outside the boundary cannot outvote tens of
+thousands of dark ones.  Pixels whose consensus lies within ``NEAR`` of Theta_1 are left out
+(they look like the foreground: the object's uncovered part).  When the best plane's mean
+standardised cost is below that of the fitted Theta_2 by more than ``Params.background_sweep``,
+Theta_2 becomes that plane (its disparity refined to the vertex of the parabola through the
+best candidate and its neighbours), provided that it is a distinct dip of the swept curve
+(``WIDTH``): a slanted or curved background, whose pixels dip at many disparities, sweeps to a
+broad bowl whose lowest plane explains none of it (paper15 scene 2, a wall spanning 60 px of
+disparity: the plane at the range's end, F1 0.66 -> 0.46), and is left to the fit.  On a
+textured fronto-parallel background the plane can win too, where it explains the background
+better than the fitted quadratic; the paper's scenes keep their F1 (``docs/design.md``).
+
+The sweep runs after the fit in each of the first ``reinit_every`` iterations (while the
+first consensus' pull on Theta_2 is undone) and then at every re-initialisation.  On the
+six scenes above (``lss eval``, with ``background_sweep=0`` -> with it): 0.00 -> 0.86,
+0.96, 0.98 and 0.96; 0.77 -> 0.91; 0.48 -> 0.94; a dark background that is curved becomes
+a plane (stress ``curved_ball_dark``: 0.93 by the recovery's second solve -> 0.86).
+
+Frames and units are the solver's: cyclopean planes, ``c = 1 .. c_max`` (volume index
+``k = c - 1``), Theta in cyclopean units.
+"""
+import math
+
+import numpy as np
+import taichi as ti
+
+__all__ = ["BackgroundSweep", "NEAR", "WIDTH", "distinct_dip", "plane_vertex"]
+
+#: A background pixel whose consensus lies within this of Theta_1 (cyclopean pixels) is left
+#: out of the sweep.
+NEAR = 1.5
+#: The best plane must be a distinct dip of the swept curve: the candidates below half its
+#: depth (from the curve's mean) span at most this fraction of the range (or 2 candidates).
+WIDTH = 0.25
+
+
+@ti.data_oriented
+class BackgroundSweep:
+    """Owns each pixel's cost-curve standardisation (``centre``, ``inv_spread``: the mean and
+    the inverse standard deviation of M over c), the swept pixels (``swept``, with their
+    standardised cost at the fitted Theta_2, ``at_theta2``) and the sweep's per-row sums;
+    :meth:`run` sweeps and, when a plane wins, sets Theta_2 to it.
+
+    Parameters
+    ----------
+    pool : FieldPool
+    height, width, c_max : int
+    """
+
+    def __init__(self, pool, height, width, c_max):
+        self.H, self.W, self.C = int(height), int(width), int(c_max)
+        self.extent = pool.extent(self.H, self.W)
+        Hb, Wb = self.extent.bucket
+        self.centre = pool.field(ti.f32, (Hb, Wb), bucket=True)
+        self.inv_spread = pool.field(ti.f32, (Hb, Wb), bucket=True)
+        self.swept = pool.field(ti.f32, (Hb, Wb), bucket=True)
+        self.at_theta2 = pool.field(ti.f32, (Hb, Wb), bucket=True)
+        # per row: the standardised cost summed over the row's swept pixels at each c (k < C),
+        # at the fitted Theta_2 (k = C) and the pixels' count (k = C + 1)
+        self.rows = pool.field(ti.f32, (Hb, self.C + 2), volume=True)
+        self.totals = pool.field(ti.f32, (self.C + 2,), volume=True)
+
+    @ti.kernel
+    def standardise(self, cost: ti.template()):
+        """``centre`` and ``inv_spread`` of every pixel's curve ``cost[y, x, :]`` (M, the
+        hierarchy's level-1 volume); a flat curve gets ``inv_spread = 0`` (no vote)."""
+        C = ti.static(self.C)
+        height, width = self.extent.height(), self.extent.width()
+        for y, x in ti.ndrange(*ti.static(self.extent.bucket)):
+            if y < height and x < width:
+                s = 0.0
+                for k in range(C):
+                    s += cost[y, x, k]
+                m = s / C
+                v = 0.0
+                for k in range(C):
+                    v += (cost[y, x, k] - m) ** 2
+                sd = ti.sqrt(v / C)
+                self.centre[y, x] = m
+                self.inv_spread[y, x] = 1.0 / sd if sd > 1e-9 else 0.0
+
+    @ti.func
+    def _z(self, cost: ti.template(), y, x, c):
+        """The standardised cost at real cyclopean c (linear between candidates, clamped to
+        ``[1, c_max]``)."""
+        C = ti.static(self.C)
+        kf = ti.min(ti.max(c - 1.0, 0.0), C - 1.0)
+        k0 = ti.min(ti.cast(ti.floor(kf), ti.i32), ti.max(C - 2, 0))
+        k1 = ti.min(k0 + 1, C - 1)
+        t = kf - k0
+        m = (1.0 - t) * cost[y, x, k0] + t * cost[y, x, k1]
+        return (m - self.centre[y, x]) * self.inv_spread[y, x]
+
+    @ti.kernel
+    def _select(self, cost: ti.template(), shapes: ti.template(), phi: ti.template(),
+                phi_plus: ti.template(), consensus: ti.template(), near: ti.f32):
+        """``swept``: 1 on the visible background away from Theta_1's consensus, else 0;
+        ``at_theta2``: there, the standardised cost at the fitted Theta_2."""
+        height, width = self.extent.height(), self.extent.width()
+        for y, x in ti.ndrange(*ti.static(self.extent.bucket)):
+            if y < height and x < width:
+                w = 0.0
+                z = 0.0
+                if phi[y, x] < 0 and phi_plus[y, x] < 0:
+                    xf, yf = ti.cast(x, ti.f32), ti.cast(y, ti.f32)
+                    if ti.abs(consensus[y, x] - shapes.value(0, xf, yf)) >= near:
+                        w = 1.0
+                        z = self._z(cost, y, x, shapes.value(1, xf, yf))
+                self.swept[y, x] = w
+                self.at_theta2[y, x] = z
+
+    @ti.kernel
+    def _accumulate(self, cost: ti.template()):
+        C = ti.static(self.C)
+        height, width = self.extent.height(), self.extent.width()
+        for y, k in ti.ndrange(self.extent.bucket[0], C + 2):
+            if y < height:
+                s = 0.0
+                for x in range(width):
+                    if k < C:
+                        s += self.swept[y, x] * ((cost[y, x, k] - self.centre[y, x])
+                                                 * self.inv_spread[y, x])
+                    elif k == C:
+                        s += self.at_theta2[y, x]
+                    else:
+                        s += self.swept[y, x]
+                self.rows[y, k] = s
+
+    @ti.kernel
+    def _reduce(self):
+        height = self.extent.height()
+        for k in range(self.C + 2):
+            t = 0.0
+            for y in range(height):
+                t += self.rows[y, k]
+            self.totals[k] = t
+
+    @ti.kernel
+    def _set_plane(self, shapes: ti.template(), c: ti.f32):
+        for a in range(6):
+            shapes.theta[1, a] = c if a == 5 else 0.0
+
+    def run(self, iteration, params, cost, shapes, phi, phi_plus, consensus):
+        """After the fit of iteration ``iteration`` (1-based): when a sweep is due (each of
+        the first ``params.reinit_every`` iterations, then every ``reinit_every``; never
+        with ``params.background_sweep`` = 0), sweep the visible background (``phi < 0``
+        and ``phi_plus < 0``) and set Theta_2 to the best fronto-parallel plane when its
+        mean standardised cost is more than ``params.background_sweep`` below the fitted
+        Theta_2's.  Returns the plane's disparity (cyclopean), or None when Theta_2 is
+        kept.  Reads ``c_max + 2`` numbers back to the host."""
+        every = params.reinit_every
+        if params.background_sweep <= 0 or (iteration > every and iteration % every):
+            return None
+        self._select(cost, shapes, phi, phi_plus, consensus, NEAR)
+        self._accumulate(cost)
+        self._reduce()
+        return self.decide(self.totals.to_numpy().astype(np.float64), params.background_sweep,
+                           shapes)
+
+    def decide(self, totals, margin, shapes=None):
+        """The plane chosen from the sweep's ``totals`` (see :meth:`run`); with ``shapes``,
+        Theta_2 is set to it."""
+        C = self.C
+        n = totals[C + 1]
+        if n < 1:
+            return None
+        mean = totals[:C] / n
+        k = int(np.argmin(mean))
+        if not (mean[k] < totals[C] / n - margin and distinct_dip(mean, k)):
+            return None
+        c = plane_vertex(mean, k)
+        if shapes is not None:
+            self._set_plane(shapes, c)
+        return c
+
+
+def distinct_dip(mean, k):
+    """Whether candidate ``k`` of the swept curve ``mean`` is a distinct dip (``WIDTH``)."""
+    half = mean[k] + 0.5 * (float(np.mean(mean)) - mean[k])
+    return int(np.count_nonzero(mean < half)) <= max(2, WIDTH * len(mean))
+
+
+def plane_vertex(mean, k):
+    """Cyclopean disparity of the vertex of the parabola through ``mean[k - 1 .. k + 1]``
+    (within half a candidate of ``k + 1``; ``k + 1`` at the range's ends or on a flat
+    curve)."""
+    c = k + 1.0
+    if 0 < k < len(mean) - 1:
+        a, b, d = mean[k - 1], mean[k], mean[k + 1]
+        den = a - 2.0 * b + d
+        if den > 0 and math.isfinite(den):
+            c += min(max(0.5 * (a - d) / den, -0.5), 0.5)
+    return c
