@@ -129,6 +129,8 @@ class BackgroundSweep:
 
     @ti.kernel
     def _accumulate(self, cost: ti.template()):
+        """``rows``: per row, the swept pixels' standardised cost summed at every candidate,
+        their ``at_theta2`` summed, and their count (a thread per row and column of sums)."""
         C = ti.static(self.C)
         height, width = self.extent.height(), self.extent.width()
         for y, k in ti.ndrange(self.extent.bucket[0], C + 2):
@@ -146,6 +148,7 @@ class BackgroundSweep:
 
     @ti.kernel
     def _reduce(self):
+        """``totals``: ``rows`` summed over the image's rows, in row order."""
         height = self.extent.height()
         for k in range(self.C + 2):
             t = 0.0
@@ -155,6 +158,7 @@ class BackgroundSweep:
 
     @ti.kernel
     def _set_plane(self, shapes: ti.template(), c: ti.f32):
+        """Theta_2 := the fronto-parallel plane at cyclopean disparity ``c``."""
         for a in range(6):
             shapes.theta[1, a] = c if a == 5 else 0.0
 
@@ -164,8 +168,9 @@ class BackgroundSweep:
         with ``params.background_sweep`` = 0), sweep the visible background (``phi < 0``
         and ``phi_plus < 0``) and set Theta_2 to the best fronto-parallel plane when its
         mean standardised cost is more than ``params.background_sweep`` below the fitted
-        Theta_2's.  Returns the plane's disparity (cyclopean), or None when Theta_2 is
-        kept.  Reads ``c_max + 2`` numbers back to the host."""
+        Theta_2's and it is a distinct dip (:func:`distinct_dip`).  Returns the plane's
+        disparity (cyclopean), or None when Theta_2 is kept.  Reads ``c_max + 2`` numbers
+        back to the host."""
         every = params.reinit_every
         if params.background_sweep <= 0 or (iteration > every and iteration % every):
             return None
