@@ -130,11 +130,14 @@ class Params:
         an offset fitted at the pair's matches) before the costs, where the views differ and
         that model explains the difference (:mod:`lss_kernels.photometry`).
     background_sweep : float
-        Margin of the background's plane sweep (:mod:`lss_kernels.model.sweep`): Theta_2
-        becomes the fronto-parallel plane that minimises the visible background's mean
-        standardised matching cost when that mean lies more than this below the fitted
-        Theta_2's (a background too dark or too weakly textured for the consensus to place
-        it).  0: Theta_2 is always the Eq. 8 fit, as in the paper.
+        Margin of the background's plane sweep (:mod:`lss_kernels.model.sweep`): after the
+        fit, in the first ``reinit_every`` iterations and at every re-initialisation,
+        Theta_2 is reset to the fronto-parallel plane that minimises the visible
+        background's mean standardised matching cost when that mean lies more than this
+        below the fitted Theta_2's and the plane is a distinct dip of the sweep (a
+        background too dark or too weakly textured for the consensus to place it); the
+        next iterations fit Theta_2 again, from the consensus that the plane's D has
+        shaped.  0: Theta_2 is always the Eq. 8 fit, as in the paper.
     zero_floor : bool
         Search a pair from 0 px when its first consensus puts at least 15 % of its confident
         pixels below 4 px (a far background), else from 2 px as the authors' grid does

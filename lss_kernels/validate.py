@@ -71,7 +71,7 @@ def check_range(d_max, width):
 
 def fields_bytes(height, width, d_max) -> int:
     """About the bytes of a solver's fields for a ``width x height`` pair searched to
-    ``d_max`` (the default parameters; a little under what they hold): per pixel of the size
+    ``d_max`` (the default parameters; under what they hold): per pixel of the size
     bucket, 640 bytes of planes and 16 bytes for each of the ``c_max`` candidates of the
     volumes (measured at 256x192: 728 + 17.0 c_max)."""
     from .kernels.backend import bucket_shape

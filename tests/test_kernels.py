@@ -911,11 +911,12 @@ def test_median_filter_matches_numpy_with_ties_and_borders(fresh_taichi):
 def test_background_sweep_matches_reference(ti_arch):
     """The background's plane sweep (per-pixel standardised cost curves summed over the
     visible background, pixels near Theta_1 left out) against the float64 reference: the
-    per-candidate sums and their count, the mean at the fitted Theta_2, and the plane it
+    per-candidate sums and their count, the sum at the fitted Theta_2, and the plane it
     chooses; a faint dip at c = 3 under noise wins over a Theta_2 fitted at 5.5, a margin
-    larger than the dip keeps Theta_2."""
+    larger than the dip keeps Theta_2.  Swept pixels with flat curves have no vote."""
     from lss_kernels.model.shapes import GlobalShapes
-    from lss_kernels.model.sweep import NEAR, BackgroundSweep
+    from lss_kernels.model.sweep import FLAT, NEAR, BackgroundSweep
+    from lss_kernels.reference.sweep import background_sweep
     rng = np.random.default_rng(41)
     pool = FieldPool()
     shapes = GlobalShapes(pool, H, W)
@@ -928,30 +929,35 @@ def test_background_sweep_matches_reference(ti_arch):
     shapes.set(theta[0], theta[1])
     y, x = np.mgrid[0:H, 0:W].astype(np.float64)
     th1, th2 = (ref.shape_value(t.astype(np.float32), x, y, (H, W)) for t in theta)
+    f32 = lambda a: a.astype(np.float32).astype(np.float64)
+    phi_np, phi_plus_np = f32(rng.uniform(-1, 1, (H, W))), f32(rng.uniform(-1, 1, (H, W)))
+    cons_np = f32(th1 + rng.uniform(-4, 4, (H, W)))
+    visible = (phi_np < 0) & (phi_plus_np < 0)
+    sel = visible & (np.abs(cons_np - th1) >= NEAR)
+    assert 0.1 < sel.mean() < 0.3
     volume = rng.random((H, W, C)) * 0.05 + 0.3
     volume[:, :, 2] -= 0.01                     # the background's faint dip at c = 3
-    volume[3, 4, :] = 0.2                       # a flat curve: no vote
-    phi_np = rng.uniform(-1, 1, (H, W))
-    phi_plus_np = rng.uniform(-1, 1, (H, W))
-    cons_np = th1 + rng.uniform(-4, 4, (H, W))
+    flat = tuple(np.argwhere(sel)[:5].T)
+    volume[flat] = 0.2                          # flat curves on swept pixels: no vote
+    volume = f32(volume)
     for f, a in ((cost, volume), (phi, phi_np), (phi_plus, phi_plus_np), (cons, cons_np)):
         f.from_numpy(ext.padded(a.astype(np.float32)))
-    volume, phi_np, phi_plus_np, cons_np = (a.astype(np.float32).astype(np.float64) for a in
-                                            (volume, phi_np, phi_plus_np, cons_np))
     sweep.standardise(cost)
+    assert not sweep.extent.image(sweep.inv_spread)[flat].any()
     sd = volume.std(axis=2)
-    z = (volume - volume.mean(axis=2, keepdims=True)) / np.where(sd > 0, sd, 1)[..., None]
-    z[sd == 0] = 0.0
-    sel = (phi_np < 0) & (phi_plus_np < 0) & (np.abs(cons_np - th1) >= NEAR)
-    assert 0.1 < sel.mean() < 0.3
+    z = (volume - volume.mean(axis=2, keepdims=True)) / np.where(sd > FLAT, sd, 1)[..., None]
+    z[sd <= FLAT] = 0.0
     sweep._select(cost, shapes, phi, phi_plus, cons, NEAR)
     sweep._accumulate(cost)
     sweep._reduce()
     totals = sweep.totals.to_numpy()
     assert totals[C + 1] == sel.sum()
     np.testing.assert_allclose(totals[:C], z[sel].sum(axis=0), atol=1e-3)
-    visible = (phi_np < 0) & (phi_plus_np < 0)
-    from lss_kernels.reference.sweep import background_sweep
+    k = np.clip(th2 - 1.0, 0.0, C - 1.0)
+    k0 = np.minimum(np.floor(k).astype(int), C - 2)
+    at_theta2 = (1 - (k - k0)) * np.take_along_axis(z, k0[..., None], 2)[..., 0] + \
+        (k - k0) * np.take_along_axis(z, k0[..., None] + 1, 2)[..., 0]
+    assert totals[C] == pytest.approx(at_theta2[sel].sum(), abs=1e-3)
     want = background_sweep(volume, visible, th1, th2, cons_np, 0.05)
     assert want is not None and abs(want - 3.0) < 0.5
     assert sweep.decide(totals.astype(np.float64), 0.05) == pytest.approx(want, abs=1e-3)
@@ -960,11 +966,25 @@ def test_background_sweep_matches_reference(ti_arch):
                                        phi_plus, cons)
     assert due(1, 5.0) is None and due(11, 0.05) is None and due(3, 0.0) is None
     np.testing.assert_allclose(shapes.theta.to_numpy(), theta, atol=1e-6)
+    assert shapes.fitted[1] == 0
     got = due(20, 0.05)
     assert got == pytest.approx(want, abs=1e-3)
     np.testing.assert_allclose(shapes.theta.to_numpy()[1], [0, 0, 0, 0, 0, got], atol=1e-6)
     np.testing.assert_allclose(shapes.theta.to_numpy()[0], theta[0], atol=1e-6)
+    assert shapes.fitted[1] == 1                # the plane is Theta_2's fit from now on
     pool.destroy()
+
+
+def test_background_sweep_needs_a_share_of_the_image():
+    """A deep, distinct dip swept over fewer than ``MIN_SHARE`` of the image's pixels sets no
+    plane: a few pixels' curves are no background."""
+    from lss_kernels.model.sweep import MIN_SHARE, BackgroundSweep
+    sweep = BackgroundSweep.__new__(BackgroundSweep)
+    sweep.H, sweep.W, sweep.C = 100, 100, 8
+    mean = np.array([0.2, 0.2, -1.5, 0.2, 0.2, 0.3, 0.3, 0.1])
+    for n, chosen in ((MIN_SHARE * 1e4 - 1, False), (MIN_SHARE * 1e4, True)):
+        totals = np.concatenate([mean * n, [0.0 * n, n]])
+        assert (sweep.decide(totals, 0.05) is not None) == chosen
 
 
 def test_plane_vertex_of_a_parabola_and_at_the_ends():

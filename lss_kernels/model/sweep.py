@@ -8,7 +8,7 @@ weight (and, from the second iteration on, their messages echo the ``beta |c - D
 the fit is then decided by the few confident pixels outside the boundary -- the part of the
 object that the start does not cover, and the halo where large patches straddle it -- and
 Theta_2 lands on the object.  The two layers coincide, nothing drives phi, and the
-foreground vanishes (``python -m lss_kernels.stress --random 24``, seeds 1 and 2: of their
+foreground vanishes (``python -m lss_kernels.stress OUT --random 24``, seeds 1 and 2: of their
 ten scenes with such a background, six are lost or bent, four of them at occlusion F1 0).
 
 The signal is there when summed over the whole background: the mean matching cost of the
@@ -42,7 +42,8 @@ import math
 import numpy as np
 import taichi as ti
 
-__all__ = ["BackgroundSweep", "NEAR", "WIDTH", "distinct_dip", "plane_vertex"]
+__all__ = ["BackgroundSweep", "FLAT", "MIN_SHARE", "NEAR", "WIDTH", "distinct_dip",
+           "plane_vertex"]
 
 #: A background pixel whose consensus lies within this of Theta_1 (cyclopean pixels) is left
 #: out of the sweep.
@@ -50,6 +51,10 @@ NEAR = 1.5
 #: The best plane must be a distinct dip of the swept curve: the candidates below half its
 #: depth (from the curve's mean) span at most this fraction of the range (or 2 candidates).
 WIDTH = 0.25
+#: A curve whose standard deviation over c is at most this is flat (no vote).
+FLAT = 1e-6
+#: The fewest swept pixels, as a fraction of the image, for a plane to be set.
+MIN_SHARE = 0.01
 
 
 @ti.data_oriented
@@ -81,7 +86,8 @@ class BackgroundSweep:
     @ti.kernel
     def standardise(self, cost: ti.template()):
         """``centre`` and ``inv_spread`` of every pixel's curve ``cost[y, x, :]`` (M, the
-        hierarchy's level-1 volume); a flat curve gets ``inv_spread = 0`` (no vote)."""
+        hierarchy's level-1 volume); a flat curve (spread at most ``FLAT``: float32
+        rounding of a constant curve leaves about 1e-8) gets ``inv_spread = 0`` (no vote)."""
         C = ti.static(self.C)
         height, width = self.extent.height(), self.extent.width()
         for y, x in ti.ndrange(*ti.static(self.extent.bucket)):
@@ -95,7 +101,7 @@ class BackgroundSweep:
                     v += (cost[y, x, k] - m) ** 2
                 sd = ti.sqrt(v / C)
                 self.centre[y, x] = m
-                self.inv_spread[y, x] = 1.0 / sd if sd > 1e-9 else 0.0
+                self.inv_spread[y, x] = 1.0 / sd if sd > FLAT else 0.0
 
     @ti.func
     def _z(self, cost: ti.template(), y, x, c):
@@ -158,9 +164,11 @@ class BackgroundSweep:
 
     @ti.kernel
     def _set_plane(self, shapes: ti.template(), c: ti.f32):
-        """Theta_2 := the fronto-parallel plane at cyclopean disparity ``c``."""
+        """Theta_2 := the fronto-parallel plane at cyclopean disparity ``c`` (a fitted
+        shape, for the next fit's Huber and exclusive rows)."""
         for a in range(6):
             shapes.theta[1, a] = c if a == 5 else 0.0
+        shapes.fitted[1] = 1
 
     def run(self, iteration, params, cost, shapes, phi, phi_plus, consensus):
         """After the fit of iteration ``iteration`` (1-based): when a sweep is due (each of
@@ -168,7 +176,8 @@ class BackgroundSweep:
         with ``params.background_sweep`` = 0), sweep the visible background (``phi < 0``
         and ``phi_plus < 0``) and set Theta_2 to the best fronto-parallel plane when its
         mean standardised cost is more than ``params.background_sweep`` below the fitted
-        Theta_2's and it is a distinct dip (:func:`distinct_dip`).  Returns the plane's
+        Theta_2's, it is a distinct dip (:func:`distinct_dip`) and at least ``MIN_SHARE`` of
+        the image was swept.  Returns the plane's
         disparity (cyclopean), or None when Theta_2 is kept.  Reads ``c_max + 2`` numbers
         back to the host."""
         every = params.reinit_every
@@ -185,7 +194,7 @@ class BackgroundSweep:
         Theta_2 is set to it."""
         C = self.C
         n = totals[C + 1]
-        if n < 1:
+        if n < max(1.0, MIN_SHARE * self.H * self.W):
             return None
         mean = totals[:C] / n
         k = int(np.argmin(mean))

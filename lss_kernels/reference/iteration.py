@@ -206,6 +206,7 @@ def iteration(state: IterationState, params):
                                  p.background_sweep)
         if plane is not None:
             theta[1] = (0.0, 0.0, 0.0, 0.0, 0.0, plane)
+            fitted = (fitted[0], True)
     now = time.perf_counter()
     seconds["shapes"], t = now - t, now
 

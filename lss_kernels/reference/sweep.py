@@ -3,7 +3,7 @@
 :mod:`lss_kernels.reference.kernels`."""
 import numpy as np
 
-from ..model.sweep import NEAR, distinct_dip, plane_vertex
+from ..model.sweep import FLAT, MIN_SHARE, NEAR, distinct_dip, plane_vertex
 
 __all__ = ["background_sweep"]
 
@@ -12,16 +12,16 @@ def background_sweep(cost, visible, theta1, theta2, consensus, margin):
     """The background's plane sweep (:mod:`lss_kernels.model.sweep`): over the ``visible``
     pixels whose ``consensus`` lies at least ``NEAR`` from ``theta1`` (maps ``(H, W)``), the
     mean of each pixel's standardised cost curve ``(M(c) - mean_c M) / std_c M`` (0 for a
-    flat curve) at every candidate c and at ``theta2`` (linear in c, clamped to
+    curve of spread at most ``FLAT``) at every candidate c and at ``theta2`` (linear in c, clamped to
     ``[1, c_max]``).  Returns the best candidate's vertex (cyclopean) when its mean lies more
-    than ``margin`` below ``theta2``'s and it is a distinct dip (``distinct_dip``), else
-    None."""
+    than ``margin`` below ``theta2``'s and it is a distinct dip (``distinct_dip``), with at
+    least ``MIN_SHARE`` of the pixels swept; else None."""
     C = cost.shape[2]
     sd = cost.std(axis=2, keepdims=True)
-    z = (cost - cost.mean(axis=2, keepdims=True)) * np.where(sd > 1e-9, 1.0 / np.where(
-        sd > 1e-9, sd, 1.0), 0.0)
+    z = (cost - cost.mean(axis=2, keepdims=True)) * np.where(sd > FLAT, 1.0 / np.where(
+        sd > FLAT, sd, 1.0), 0.0)
     sel = visible & (np.abs(consensus - theta1) >= NEAR)
-    if not sel.any():
+    if sel.sum() < max(1.0, MIN_SHARE * sel.size):
         return None
     zs = z[sel]
     kf = np.clip(theta2[sel] - 1.0, 0.0, C - 1.0)
