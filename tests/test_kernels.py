@@ -915,8 +915,8 @@ def test_background_sweep_matches_reference(ti_arch):
     chooses; a faint dip at c = 3 under noise wins over a Theta_2 fitted at 5.5, a margin
     larger than the dip keeps Theta_2.  Swept pixels with flat curves have no vote."""
     from lss_kernels.model.shapes import GlobalShapes
-    from lss_kernels.model.sweep import FLAT, NEAR, BackgroundSweep
-    from lss_kernels.reference.sweep import background_sweep
+    from lss_kernels.model.sweep import FLAT, NEAR, BackgroundSweep, choose_plane
+    from lss_kernels.reference.sweep import background_sweep, sweep_totals
     rng = np.random.default_rng(41)
     pool = FieldPool()
     shapes = GlobalShapes(pool, H, W)
@@ -958,9 +958,11 @@ def test_background_sweep_matches_reference(ti_arch):
     at_theta2 = (1 - (k - k0)) * np.take_along_axis(z, k0[..., None], 2)[..., 0] + \
         (k - k0) * np.take_along_axis(z, k0[..., None] + 1, 2)[..., 0]
     assert totals[C] == pytest.approx(at_theta2[sel].sum(), abs=1e-3)
+    np.testing.assert_allclose(totals, sweep_totals(volume, visible, th1, th2, cons_np),
+                               atol=1e-3)
     want = background_sweep(volume, visible, th1, th2, cons_np, 0.05)
     assert want is not None and abs(want - 3.0) < 0.5
-    assert sweep.decide(totals.astype(np.float64), 0.05) == pytest.approx(want, abs=1e-3)
+    assert choose_plane(totals.astype(np.float64), 0.05, H * W) == pytest.approx(want, abs=1e-3)
     assert background_sweep(volume, visible, th1, th2, cons_np, 5.0) is None
     due = lambda it, margin: sweep.run(it, Params(background_sweep=margin), cost, shapes, phi,
                                        phi_plus, cons)
@@ -978,13 +980,11 @@ def test_background_sweep_matches_reference(ti_arch):
 def test_background_sweep_needs_a_share_of_the_image():
     """A deep, distinct dip swept over fewer than ``MIN_SHARE`` of the image's pixels sets no
     plane: a few pixels' curves are no background."""
-    from lss_kernels.model.sweep import MIN_SHARE, BackgroundSweep
-    sweep = BackgroundSweep.__new__(BackgroundSweep)
-    sweep.H, sweep.W, sweep.C = 100, 100, 8
+    from lss_kernels.model.sweep import MIN_SHARE, choose_plane
     mean = np.array([0.2, 0.2, -1.5, 0.2, 0.2, 0.3, 0.3, 0.1])
     for n, chosen in ((MIN_SHARE * 1e4 - 1, False), (MIN_SHARE * 1e4, True)):
         totals = np.concatenate([mean * n, [0.0 * n, n]])
-        assert (sweep.decide(totals, 0.05) is not None) == chosen
+        assert (choose_plane(totals, 0.05, 100 * 100) is not None) == chosen
 
 
 def test_plane_vertex_of_a_parabola_and_at_the_ends():

@@ -31,17 +31,17 @@ def test_background_sweep_planes_lie_on_the_background(easy):
     """The easy scene's textured background at 8 px is fronto-parallel: the first iteration's
     plane explains it better than the first fit and is set; every plane the sweep set lies
     at the background's disparity, and ``summary.json`` counts them."""
-    from lss_kernels.apps.jobs import _sweep_summary
+    from lss_kernels.apps.jobs import sweep_summary
     scene, result = easy
     planes = [(s["iteration"], s["background_plane"]) for s in result.history
               if s["background_plane"] is not None]
     assert planes and planes[0][0] == 1 and all(abs(d - 8.0) < 0.5 for _, d in planes)
     assert all(it <= 10 or it % 10 == 0 for it, _ in planes)
-    summary = _sweep_summary(result.history)
+    summary = sweep_summary(result.history)
     assert summary["planes_set"] == len(planes)
     assert summary["last"] == (None if not planes else
                                {"iteration": planes[-1][0], "disparity": round(planes[-1][1], 3)})
-    assert _sweep_summary([{"iteration": 1, "background_plane": None}]) == {"planes_set": 0,
+    assert sweep_summary([{"iteration": 1, "background_plane": None}]) == {"planes_set": 0,
                                                                            "last": None}
 
 

@@ -145,6 +145,7 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
     if method == "lss":
         from ..model.init import InitError
         from ..recovery import named_warnings, with_recovery
+        from .jobs import sweep_summary
 
         def run(p):
             result, rows, spent = _solve(scene, p, trace, init)
@@ -166,8 +167,7 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
                  "periodic": "first_params" in result.recovery,
                  "photometric": bool(result.photometry.get("correct")),
                  "from_zero": bool(result.search.get("from_zero")),
-                 "background_planes": sum(s.get("background_plane") is not None
-                                          for s in result.history),
+                 "background_planes": sweep_summary(result.history)["planes_set"],
                  "bad4_surface": float(metrics.score(result.surface, result.occlusion,
                                                      scene)["bad4"])}
         if trace:

@@ -28,7 +28,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Job", "SolverCache", "job_from_scene", "run_job", "scene_init", "write_outputs"]
+__all__ = ["Job", "SolverCache", "job_from_scene", "run_job", "scene_init", "sweep_summary",
+           "write_outputs"]
 
 
 @dataclass
@@ -165,7 +166,7 @@ def _jsonable(value):
     return value
 
 
-def _sweep_summary(history):
+def sweep_summary(history):
     """How often the background's plane sweep set Theta_2 (:mod:`lss_kernels.model.sweep`),
     and its last plane (iteration, left-view disparity)."""
     planes = [(s["iteration"], s["background_plane"]) for s in history
@@ -204,7 +205,7 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None):
                                        passes=[list(p) for p in params.refine_passes],
                                        ratio=params.refine_ratio,
                                        seconds=round(result.timings.get("refine", 0.0), 4)),
-                       background_sweep=_sweep_summary(result.history),
+                       background_sweep=sweep_summary(result.history),
                        params=params.to_dict())
         summary.update(extra or {})
         with open(os.path.join(tmp, "summary.json"), "w") as f:

@@ -42,8 +42,8 @@ import math
 import numpy as np
 import taichi as ti
 
-__all__ = ["BackgroundSweep", "FLAT", "MIN_SHARE", "NEAR", "WIDTH", "distinct_dip",
-           "plane_vertex"]
+__all__ = ["BackgroundSweep", "FLAT", "MIN_SHARE", "NEAR", "WIDTH", "choose_plane",
+           "distinct_dip", "due", "plane_vertex"]
 
 #: A background pixel whose consensus lies within this of Theta_1 (cyclopean pixels) is left
 #: out of the sweep.
@@ -171,39 +171,45 @@ class BackgroundSweep:
         shapes.fitted[1] = 1
 
     def run(self, iteration, params, cost, shapes, phi, phi_plus, consensus):
-        """After the fit of iteration ``iteration`` (1-based): when a sweep is due (each of
-        the first ``params.reinit_every`` iterations, then every ``reinit_every``; never
-        with ``params.background_sweep`` = 0), sweep the visible background (``phi < 0``
-        and ``phi_plus < 0``) and set Theta_2 to the best fronto-parallel plane when its
-        mean standardised cost is more than ``params.background_sweep`` below the fitted
-        Theta_2's, it is a distinct dip (:func:`distinct_dip`) and at least ``MIN_SHARE`` of
-        the image was swept.  Returns the plane's
-        disparity (cyclopean), or None when Theta_2 is kept.  Reads ``c_max + 2`` numbers
-        back to the host."""
-        every = params.reinit_every
-        if params.background_sweep <= 0 or (iteration > every and iteration % every):
+        """After the fit of iteration ``iteration`` (1-based), when a sweep is :func:`due`:
+        sweep the visible background (``phi < 0`` and ``phi_plus < 0``) and set Theta_2 to
+        the plane :func:`choose_plane` picks.  Returns the plane's disparity (cyclopean), or
+        None when Theta_2 is kept.  Reads ``c_max + 2`` numbers back to the host."""
+        if not due(iteration, params):
             return None
         self._select(cost, shapes, phi, phi_plus, consensus, NEAR)
         self._accumulate(cost)
         self._reduce()
-        return self.decide(self.totals.to_numpy().astype(np.float64), params.background_sweep,
-                           shapes)
-
-    def decide(self, totals, margin, shapes=None):
-        """The plane chosen from the sweep's ``totals`` (see :meth:`run`); with ``shapes``,
-        Theta_2 is set to it."""
-        C = self.C
-        n = totals[C + 1]
-        if n < max(1.0, MIN_SHARE * self.H * self.W):
-            return None
-        mean = totals[:C] / n
-        k = int(np.argmin(mean))
-        if not (mean[k] < totals[C] / n - margin and distinct_dip(mean, k)):
-            return None
-        c = plane_vertex(mean, k)
-        if shapes is not None:
+        c = choose_plane(self.totals.to_numpy().astype(np.float64), params.background_sweep,
+                         self.H * self.W)
+        if c is not None:
             self._set_plane(shapes, c)
         return c
+
+
+def due(iteration, params):
+    """Whether the sweep runs after the fit of iteration ``iteration`` (1-based): in each of
+    the first ``params.reinit_every`` iterations and then every ``reinit_every``; never with
+    ``params.background_sweep`` = 0."""
+    every = params.reinit_every
+    return params.background_sweep > 0 and (iteration <= every or iteration % every == 0)
+
+
+def choose_plane(totals, margin, pixels):
+    """The plane (cyclopean disparity, :func:`plane_vertex`) from a sweep's ``totals``: the
+    standardised cost summed at each of the ``c_max`` candidates, at the fitted Theta_2, and
+    the swept pixels' count.  None unless its mean lies more than ``margin`` below the fitted
+    Theta_2's, it is a distinct dip (:func:`distinct_dip`) and at least ``MIN_SHARE`` of the
+    image's ``pixels`` were swept."""
+    C = len(totals) - 2
+    n = totals[C + 1]
+    if n < max(1.0, MIN_SHARE * pixels):
+        return None
+    mean = totals[:C] / n
+    k = int(np.argmin(mean))
+    if not (mean[k] < totals[C] / n - margin and distinct_dip(mean, k)):
+        return None
+    return plane_vertex(mean, k)
 
 
 def distinct_dip(mean, k):

@@ -55,6 +55,7 @@ import numpy as np
 
 from ..model import FIXED_POINT_STEPS, STAGES
 from . import kernels as ref
+from ..model.sweep import due
 from .sweep import background_sweep
 
 __all__ = ["IterationState", "STAGES", "iteration", "run", "state_from_solver"]
@@ -200,7 +201,7 @@ def iteration(state: IterationState, params):
         updated.append(ok)
     fitted = tuple(bool(f or u) for f, u in zip(state.fitted, updated))
     plane = None
-    if p.background_sweep > 0 and (it <= p.reinit_every or it % p.reinit_every == 0):
+    if due(it, p):
         plane = background_sweep(state.costs[0], (phi < 0) & (phi_plus < 0),
                                  theta_map(theta[0]), theta_map(theta[1]), mean,
                                  p.background_sweep)

@@ -1,35 +1,31 @@
 """Readable numpy specification of the background's plane sweep
 (:mod:`lss_kernels.model.sweep`), in float64; frames and units as in
-:mod:`lss_kernels.reference.kernels`."""
+:mod:`lss_kernels.reference.kernels`.  The sums are specified here; the choice among them is
+the model's own :func:`~lss_kernels.model.sweep.choose_plane` (a host function)."""
 import numpy as np
 
-from ..model.sweep import FLAT, MIN_SHARE, NEAR, distinct_dip, plane_vertex
+from ..model.sweep import FLAT, NEAR, choose_plane
+from .kernels import interp_volume
 
-__all__ = ["background_sweep"]
+__all__ = ["background_sweep", "sweep_totals"]
+
+
+def sweep_totals(cost, visible, theta1, theta2, consensus):
+    """Over the ``visible`` pixels whose ``consensus`` lies at least ``NEAR`` from ``theta1``
+    (maps ``(H, W)``): each pixel's standardised cost curve ``(M(c) - mean_c M) / std_c M``
+    (0 for a curve of spread at most ``FLAT``) summed at every candidate c, summed at
+    ``theta2`` (linear in c, clamped to ``[1, c_max]``), and the pixels' count."""
+    sd = cost.std(axis=2, keepdims=True)
+    z = np.where(sd > FLAT, (cost - cost.mean(axis=2, keepdims=True)) / np.maximum(sd, FLAT),
+                 0.0)
+    sel = visible & (np.abs(consensus - theta1) >= NEAR)
+    x = np.broadcast_to(np.arange(cost.shape[1], dtype=np.float64), sel.shape)
+    at_theta2 = interp_volume(z, x, theta2)
+    return np.concatenate([z[sel].sum(axis=0), [at_theta2[sel].sum(), sel.sum()]])
 
 
 def background_sweep(cost, visible, theta1, theta2, consensus, margin):
-    """The background's plane sweep (:mod:`lss_kernels.model.sweep`): over the ``visible``
-    pixels whose ``consensus`` lies at least ``NEAR`` from ``theta1`` (maps ``(H, W)``), the
-    mean of each pixel's standardised cost curve ``(M(c) - mean_c M) / std_c M`` (0 for a
-    curve of spread at most ``FLAT``) at every candidate c and at ``theta2`` (linear in c, clamped to
-    ``[1, c_max]``).  Returns the best candidate's vertex (cyclopean) when its mean lies more
-    than ``margin`` below ``theta2``'s and it is a distinct dip (``distinct_dip``), with at
-    least ``MIN_SHARE`` of the pixels swept; else None."""
-    C = cost.shape[2]
-    sd = cost.std(axis=2, keepdims=True)
-    z = (cost - cost.mean(axis=2, keepdims=True)) * np.where(sd > FLAT, 1.0 / np.where(
-        sd > FLAT, sd, 1.0), 0.0)
-    sel = visible & (np.abs(consensus - theta1) >= NEAR)
-    if sel.sum() < max(1.0, MIN_SHARE * sel.size):
-        return None
-    zs = z[sel]
-    kf = np.clip(theta2[sel] - 1.0, 0.0, C - 1.0)
-    k0 = np.clip(np.floor(kf).astype(int), 0, max(C - 2, 0))
-    k1 = np.minimum(k0 + 1, C - 1)
-    rows = np.arange(len(zs))
-    at_theta2 = ((1.0 - (kf - k0)) * zs[rows, k0] + (kf - k0) * zs[rows, k1]).mean()
-    mean = zs.mean(axis=0)
-    k = int(np.argmin(mean))
-    return (plane_vertex(mean, k) if mean[k] < at_theta2 - margin and distinct_dip(mean, k)
-            else None)
+    """The plane the sweep sets (cyclopean disparity), or None: :func:`sweep_totals` through
+    :func:`~lss_kernels.model.sweep.choose_plane`."""
+    return choose_plane(sweep_totals(cost, visible, theta1, theta2, consensus), margin,
+                        visible.size)
