@@ -28,6 +28,17 @@ beyond wins on both at least ``SHORT_SHARE`` of the textured pixels (about the s
 whose disparity the range misses).  The detail keeps a gain between the views (exposure)
 from passing for matches beyond the range; the grey levels keep stripes from doing so.
 
+With no range given, :func:`estimate_range` proposes one from the same grey copies: each
+textured pixel's best shift over half the image's width (grey and detail costs summed) is
+kept where it is distinct (below ``MARGIN`` times the best beyond one shift of it) and the
+right view's best match of its match points back to it.  A shift holds signal where its
+kept matches (averaged with its neighbours') exceed ``RANGE_FLOOR`` times the median shift's
+(false matches spread evenly over the shifts); such shifts at most ``RANGE_GAP`` px apart
+form runs, runs with less than ``RANGE_SHARE`` of the kept matches are dropped (repeated
+texture matched far off), and the range is 15 % and 8 px above the farthest shift with
+signal, rounded up to 8 px.  A layer without texture gives no matches, so its disparity can
+lie beyond the proposal; repeated texture and noise can put it far beyond the scene's.
+
 Measured on paper15 and the stress scenes (``python -m lss_kernels.stress``, seeds 0 and 2):
 see ``docs/design.md``.
 """
@@ -35,8 +46,8 @@ import math
 
 import numpy as np
 
-__all__ = ["MARGIN", "SHORT_SHARE", "SWAPPED_RATIO", "SWAPPED_SHARE", "match_direction",
-           "match_range"]
+__all__ = ["MARGIN", "RANGE_FLOOR", "RANGE_GAP", "RANGE_SHARE", "SHORT_SHARE", "SWAPPED_RATIO",
+           "SWAPPED_SHARE", "estimate_range", "match_direction", "match_range"]
 
 MAX_WIDTH = 320        # the check's image width at most, pixels (block averages)
 WINDOW = 5             # side of the square that sums absolute differences, pixels
@@ -46,6 +57,9 @@ SWAPPED_SHARE = 0.5    # swapped: the reversed direction wins this share of text
 SWAPPED_RATIO = 3.0    # ... and this many times as many as the stated one
 MIN_TEXTURED = 200     # fewer textured pixels: no verdict
 SHORT_SHARE = 0.1      # range too short: matches beyond it win this share of textured pixels
+RANGE_FLOOR = 4.0      # estimate_range: a shift's matches must exceed this x the median shift's
+RANGE_GAP = 8          # ... such shifts farther apart than this (px) split into runs
+RANGE_SHARE = 0.003    # ... and runs with less than this share of the kept matches are dropped
 
 
 def _box(a, k):
@@ -147,3 +161,58 @@ def match_range(left, right, d_max) -> dict:
     share = float(beyond_wins.sum()) / n
     facts.update(beyond=share, short=share >= SHORT_SHARE)
     return facts
+
+
+def estimate_range(left, right) -> dict:
+    """A search range for a pair given none: the largest disparity of its distinct,
+    left-right consistent matches (module text), with a margin.
+
+    ``left``, ``right``: float images in [0, 1] of one shape.  Returns ``d_max`` (left-view
+    px, a multiple of 8, at least 16), ``farthest`` (the farthest shift with signal, px),
+    ``matches`` (the pixels kept, at the check's scale) and ``scale``.  Raises ValueError
+    when fewer than ``MIN_TEXTURED`` matches are kept (too little texture)."""
+    f, gl, gr = _greys(left, right)
+    H, W = gl.shape
+    S = W // 2
+    if H < WINDOW or S < 1:
+        raise ValueError(f"left: {W * f}x{H * f} pixels are too few to estimate d_max; give it")
+    dl, dr = _detail(gl), _detail(gr)
+    Hc, Wc = H - WINDOW + 1, W - WINDOW + 1
+    cost = np.full((S + 1, Hc, Wc), np.inf, np.float32)
+    for s in range(S + 1):                     # left x against right x - s, x >= s
+        cost[s, :, s:] = (_box(np.abs(gl[:, s:] - gr[:, :W - s]), WINDOW)
+                          + _box(np.abs(dl[:, s:] - dr[:, :W - s]), WINDOW))
+    best = np.argmin(cost, axis=0)
+    lowest = np.take_along_axis(cost, best[None], 0)[0]
+    shifts = np.arange(S + 1)[:, None, None]
+    beyond = np.where(np.abs(shifts - best[None]) > 1, cost, np.inf).min(axis=0)
+    # the right view's best match of right column u = x - s, read off the same costs
+    back = np.full((Hc, Wc), np.inf, np.float32)
+    back_best = np.zeros((Hc, Wc), np.int64)
+    for s in range(S + 1):
+        c = cost[s, :, s:]
+        better = c < back[:, :Wc - s]
+        back[:, :Wc - s] = np.where(better, c, back[:, :Wc - s])
+        back_best[:, :Wc - s] = np.where(better, s, back_best[:, :Wc - s])
+    u = np.arange(Wc)[None, :] - best
+    mutual = np.abs(np.take_along_axis(back_best, np.clip(u, 0, Wc - 1), 1) - best) <= 1
+    kept = (_textured(gl) & np.isfinite(lowest) & (lowest < MARGIN * beyond)
+            & (u >= 0) & mutual)
+    found = best[kept]
+    if found.size < MIN_TEXTURED:
+        raise ValueError(f"left, right: {found.size} distinct matches, too few to estimate "
+                         f"d_max (at least {MIN_TEXTURED}); give it")
+    hist = np.bincount(found, minlength=S + 1)
+    counts = np.convolve(hist, np.ones(3) / 3, mode="same")
+    floor = RANGE_FLOOR * np.median(counts)
+    signal = np.nonzero(counts > floor)[0]
+    runs = np.split(signal, np.nonzero(np.diff(signal) * f > RANGE_GAP)[0] + 1)
+    runs = [r for r in runs if r.size and hist[r[0]:r[-1] + 1].sum() >= RANGE_SHARE * found.size]
+    if runs:                                   # the last run's farthest shift above the floor
+        last = max(runs, key=lambda r: r[-1])
+        above = np.nonzero(hist[last[0]:last[-1] + 1] > floor)[0]
+        farthest = float((last[0] + (above[-1] if above.size else last.size - 1)) * f)
+    else:
+        farthest = float(np.argmax(hist) * f)
+    d_max = max(16, 8 * math.ceil((1.15 * farthest + 8) / 8))
+    return {"d_max": d_max, "farthest": farthest, "matches": int(found.size), "scale": f}

@@ -433,7 +433,8 @@ def _cli(capsys, tmp_path, args, ti_arch):
     ("init_radius", r"^init: expected positive radii, got rx=0, ry=8$"),
     ("init_mask_shape", r"^init: expected a mask of shape \(48, 64\), got shape \(20, 30\)$"),
     ("init_mask_empty", r"^init: the mask is empty"),
-    ("no_dmax", r"^--dmax: required with LEFT RIGHT$"),
+    ("no_dmax", r"^--dmax: required with LEFT RIGHT(; this pair's distinct matches reach "
+                r"\d+ px, so try --dmax \d+ \(an estimate: .*\))?$"),
     ("init_box_empty", r"^init: expected a box with x0 < x1 and y0 < y1 \(positive area\)"),
     ("init_point_outside", r"^init: expected a point inside the 64x48 image"),
     ("one_image", r"^expected LEFT RIGHT \(two images\) or --scene DIR, got 1 image"),

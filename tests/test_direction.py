@@ -1,5 +1,6 @@
 """Swapped views are recognised before the solve (``lss_kernels.direction``) and reported."""
 import json
+import re
 import warnings
 
 import imageio.v3 as iio
@@ -198,3 +199,54 @@ def test_lss_eval_names_the_scene_whose_views_look_swapped(ti_arch, tmp_path, ca
                  str(tmp_path / "out"), "--arch", ti_arch, "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "lss eval: warning: mirror: the views look swapped" in err
+
+
+def test_the_estimated_range_of_a_shifted_pair_is_its_shift_with_the_margin():
+    left, right = shifted_pair(shift=12, shape=(60, 200), seed=3)
+    facts = direction.estimate_range(left, right)
+    assert facts["farthest"] == 12 and facts["scale"] == 1
+    assert facts["d_max"] == 24                          # 8 * ceil((1.15 * 12 + 8) / 8)
+    assert facts["matches"] > 0.5 * 56 * 196             # most windows match distinctly
+
+
+@pytest.mark.parametrize("name", ["easy", "slanted"])
+def test_the_estimated_range_holds_the_rendered_scenes_disparities(name):
+    scene = make_scene(name)
+    largest = float(np.nanmax(scene.disp_left))
+    facts = direction.estimate_range(scene.left, scene.right)
+    assert largest - 1 <= facts["farthest"] <= largest + 2
+    assert largest < facts["d_max"] <= 1.15 * largest + 16
+
+
+def test_far_repeated_matches_of_a_small_patch_do_not_widen_the_estimate():
+    """A copy of a few windows 60 px off in the right view (repeated texture) matches
+    distinctly and both ways, but as a run under RANGE_SHARE of the matches it is dropped."""
+    left, right = shifted_pair(shift=10, shape=(80, 240), seed=4)
+    right = right.copy()
+    right[30:34, 20:30] = left[30:34, 80:90]           # left x in 80..89 now also at x - 60
+    assert direction.estimate_range(left, right)["farthest"] == 10
+
+
+def test_a_pair_without_texture_has_no_estimate():
+    flat = np.full((40, 96), 0.5, np.float32)
+    with pytest.raises(ValueError, match=r"^left, right: 0 distinct matches, too few to "
+                                         r"estimate d_max \(at least 200\); give it$"):
+        direction.estimate_range(flat, flat)
+
+
+def test_lss_solve_without_dmax_suggests_the_estimate_and_writes_nothing(tmp_path, capsys):
+    from lss_kernels.apps.cli import main
+    scene = make_scene("easy")                          # foreground at 24 px
+    for side in ("left", "right"):
+        iio.imwrite(tmp_path / f"{side}.png",
+                    (getattr(scene, side) * 255).round().astype(np.uint8))
+    out = tmp_path / "out"
+    assert main(["solve", str(tmp_path / "left.png"), str(tmp_path / "right.png"),
+                 "--out", str(out)]) == 2
+    error = capsys.readouterr().err.strip().splitlines()[-1]
+    found = re.fullmatch(r"lss solve: error: --dmax: required with LEFT RIGHT; this pair's "
+                         r"distinct matches reach (\d+) px, so try --dmax (\d+) \(an estimate: "
+                         r"a layer without texture may lie beyond it\)", error)
+    assert found, error
+    assert 23 <= int(found[1]) <= 26 and int(found[2]) == 40
+    assert not out.exists()

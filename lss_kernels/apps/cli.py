@@ -114,9 +114,22 @@ def _inputs(args):
         raise CliError(f"expected LEFT RIGHT (two images) or --scene DIR, got "
                        f"{len(args.images)} image argument(s)")
     if args.dmax is None:
-        raise CliError("--dmax: required with LEFT RIGHT")
+        raise CliError("--dmax: required with LEFT RIGHT" + _range_hint(*args.images))
     init = parse_init(args.init) if args.init else "auto"
     return args.images[0], args.images[1], args.dmax, init, "left", None
+
+
+def _range_hint(left, right):
+    """What the error for a missing ``--dmax`` suggests: the pair's estimated range
+    (:func:`lss_kernels.direction.estimate_range`), or nothing when it cannot be had."""
+    from ..direction import estimate_range
+    from ..validate import check_pair
+    try:
+        facts = estimate_range(*check_pair(left, right))
+    except ValueError:
+        return ""
+    return (f"; this pair's distinct matches reach {facts['farthest']:.0f} px, so try "
+            f"--dmax {facts['d_max']} (an estimate: a layer without texture may lie beyond it)")
 
 
 class Progress:
