@@ -371,3 +371,72 @@ def test_pick_region_prefers_a_large_region_near_the_centre():
     assert mask.sum() == 100 and mask[20, 30]
     assert facts["candidates"] == 2 and facts["centroid"] == [29.5, 19.5]
     assert pick_region(np.full((5, 5), -1), 1) == (None, {"candidates": 0})
+
+
+def _board_scene():
+    """First-consensus depths (cyclopean px) of an object standing on a board in front of a
+    far wall: the wall on 60 % of a 60 x 100 image, the board (a gentle ramp) between, the
+    object 6-7 px in front of the board."""
+    y, x = np.mgrid[0:60, 0:100]
+    d = np.full((60, 100), 2.0, np.float32)
+    board = (x >= 30) & (x < 70)
+    d[board] = (9.0 + 0.05 * y[board]).astype(np.float32)
+    obj = (y >= 20) & (y < 40) & (x >= 42) & (x < 58)
+    d[obj] = 16.0
+    return d, board, obj
+
+
+@pytest.mark.parametrize("nest", [True, False])
+def test_auto_looks_into_a_candidate_over_a_quarter_of_the_image(ti_arch, nest, monkeypatch):
+    """The background fit follows the far wall, so the board and the object form one near
+    candidate (40 % of the image); the object stands above the board's own quadratic, and
+    that is the start.  Without the look inside (``NEST_AREA`` = 1) the board is taken too."""
+    from lss_kernels.kernels.backend import FieldPool
+    from lss_kernels.model import init
+    if not nest:
+        monkeypatch.setattr(init, "NEST_AREA", 1.0)
+    pool = FieldPool()
+    region = init.InitialRegion(pool, 60, 100)
+    pool.finalize()
+    d, board, obj = _board_scene()
+    region.d.from_numpy(d)
+    region.mark_near(int(init.WINDOW * 100), init.CONTRAST)
+    mask = region._auto()
+    if nest:
+        assert region.info["nested"]["taken"]
+        assert region.info["nested"]["outer_area"] > init.NEST_AREA * 60 * 100
+        grown = ndimage_dilate(obj, init.SPILL)
+        np.testing.assert_array_equal(mask, grown)           # the object, widened
+    else:
+        assert "nested" not in region.info
+        assert mask[board].mean() > 0.75 and mask[obj].all()
+
+
+def test_auto_keeps_a_large_object_whose_bulge_is_a_small_share_of_it(ti_arch):
+    """A large object (40 % of the image) with a bulge 6 px above its own quadratic over 2.5 %
+    of it (under NEST_SHARE): looked into, not cut to the bulge."""
+    from lss_kernels.kernels.backend import FieldPool
+    from lss_kernels.model import init
+    pool = FieldPool()
+    region = init.InitialRegion(pool, 60, 100)
+    pool.finalize()
+    d, board, obj = _board_scene()
+    d[obj] = d[board].mean()
+    d[27:33, 45:55] += 6.0                         # 60 px: 2.5 % of the candidate
+    region.d.from_numpy(d)
+    region.mark_near(int(init.WINDOW * 100), init.CONTRAST)
+    mask = region._auto()
+    assert region.info["nested"]["outer_area"] > init.NEST_AREA * 60 * 100
+    assert not region.info["nested"]["taken"]
+    assert mask[board].mean() > 0.75
+
+
+def ndimage_dilate(mask, radius):
+    """``mask`` dilated by a square of half-side ``radius`` (numpy only)."""
+    out = np.zeros_like(mask)
+    ys, xs = np.nonzero(mask)
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            yy, xx = np.clip(ys + dy, 0, mask.shape[0] - 1), np.clip(xs + dx, 0, mask.shape[1] - 1)
+            out[yy, xx] = True
+    return out
