@@ -52,6 +52,33 @@ def test_propagation_gives_one_label_per_component(region):
     assert (labels[d < 8] == -1).all()
 
 
+@pytest.mark.parametrize("shape", ["blobs", "spiral"])
+def test_propagation_labels_each_component_with_its_largest_index(region, shape):
+    """Against scipy's 4-connected components: every pixel of a component ends with the
+    largest index of its pixels, also along a spiral (many turns, a long path)."""
+    from scipy import ndimage
+    rng = np.random.default_rng(5)
+    if shape == "blobs":
+        mask = ndimage.binary_opening(rng.random((24, 40)) < 0.55)
+    else:
+        mask = np.zeros((24, 40), bool)
+        for k in range(0, 12, 2):                 # nested rectangles, each ring cut once
+            mask[k, k:40 - k] = mask[23 - k, k:40 - k] = True
+            mask[k:24 - k, k] = mask[k:24 - k, 39 - k] = True
+            if k + 2 < 12:
+                mask[k + 1, k + 1] = True         # joins ring k to ring k + 2
+                mask[k + 2, k + 1] = False
+    index = np.arange(24 * 40, dtype=np.int32).reshape(24, 40)
+    region.label.from_numpy(np.where(mask, index, -1).astype(np.int32))
+    region.until_stable(region.propagate)
+    got = region.label.to_numpy()
+    parts, n = ndimage.label(mask)
+    want = np.full((24, 40), -1, np.int32)
+    for k in range(1, n + 1):
+        want[parts == k] = index[parts == k].max()
+    np.testing.assert_array_equal(got, want)
+
+
 @pytest.mark.parametrize("seed", [0, 3])
 def test_region_growing_matches_the_specification(region, seed):
     d = _quantised_depths(seed)

@@ -20,10 +20,8 @@ and removes stray matches.  Then:
   (moved to the cyclopean frame by the seed's d-bar); the ellipse inscribed in the box
   (``BOX_SPILL``) when the centre has no confident match, when its region in the box is
   smaller than ``MIN_AREA`` of the image or ``MIN_BOX_COVER`` of the box (the centre is off
-  the object, as in the box of an L: 0.09 and 0.22 of the box on the stress scenes
-  ``shape_L`` and ``shape_L_curved``; on paper15 0.28 to 0.96), or when the left image is
-  periodic (:func:`lss_kernels.recovery.periodic_fraction` at least ``PERIODIC_AREA``):
-  there the centre's region overlaps the object by IoU 0.36-0.76, the ellipse by 0.99;
+  the object, as in the box of an L), or when the left image is periodic
+  (:func:`lss_kernels.recovery.periodic_fraction` at least ``PERIODIC_AREA``);
 * ``"auto"``: the near pixels that also stand more than ``CONTRAST`` above the background
   surface, a quadratic fitted to d-bar robustly (:func:`background_fit`, a stand-in for
   the model's Theta_2 before the object is known): a floor or a wall whose depth bulges
@@ -37,24 +35,19 @@ and removes stray matches.  Then:
   first fit's inliers, and the quadratic bulges over it.  It then takes back the near
   pixels within ``REGROW`` of it: an object large enough to pull the fit up loses its rim
   to the fit.  A candidate over ``NEST_AREA`` of the image is looked into: it may be the
-  object together with the surface it stands on, nearer than a far wall (paper15 scene 1,
-  a post on a folded board: 25 % of the image for a 7 % object; scene 13, a can on a floor
-  rising towards the camera: 43 % for 7 %).  A quadratic fitted to the candidate's own
-  d-bar follows that surface, and the candidate of the pixels ``NEST_CONTRAST`` above it
-  is the object, when it holds at least ``NEST_SHARE`` of the outer one (a large object's
-  bulge above its own quadratic held 1 % and 3 % of it on scenes 3 and 4, 0 and 3 % on
-  scenes 6 and 9; scene 15's slanted cylinder, 9 %, is cut to its near end wrongly);
-  its regrowth is then bound to the pixels ``CONTRAST`` above the inner fit.  On a periodic
-  left image (the test above) ``auto`` has no ellipse to fall back on: it goes on and
-  warns :class:`~lss_kernels.recovery.UnreliableStartWarning`.
+  object with the surface it stands on, nearer than a far wall (paper15 scenes 1 and 13).
+  The candidate of its pixels ``NEST_CONTRAST`` above a quadratic fitted to its own d-bar
+  is then the object, when it holds ``NEST_SHARE`` of it (a large object's bulge above
+  its own quadratic holds less; ``docs/design.md``), and regrows over pixels ``CONTRAST``
+  above that fit.  On a periodic left image ``auto`` has no ellipse to fall back on: it
+  goes on and warns :class:`~lss_kernels.recovery.UnreliableStartWarning`.
 
 A found region starts phi widened by ``SPILL`` pixels: a start that spills over the object is
 recovered by the evolution, one that covers only part of it is not always (paper15 scene 4:
 Theta_2 bulges over the uncovered part).  Except, for a point's and a box's region, towards
 the left (``SPILL_LEFT``): the object's left edge is where the background is seen by the
 left camera only, and a start that spills over it can carry the foreground on over the
-background (paper15 scene 2, a bowling pin of the image's height: F1 0.18 widened all
-round, 0.67 not to the left; ``docs/design.md``).  ``auto`` keeps the square widening.
+background (paper15 scene 2: F1 0.18 widened all round, 0.67 not to the left).
 
 Every choice is reported in :attr:`InitialRegion.info`.
 """
@@ -204,7 +197,6 @@ class InitialRegion:
         self.median = MedianFilter(pool, H, W, MEDIAN)
         self.info = {}
 
-    # ------------------------------------------------------------------ kernels
     @ti.kernel
     def load(self, mean: ti.template(), precision: ti.template()):
         for y, x in self.d:
@@ -254,19 +246,31 @@ class InitialRegion:
 
     @ti.kernel
     def propagate(self):
-        """Each labelled pixel takes the largest label among its labelled 4-neighbours."""
-        for y, x in self.label:
-            own = self.label[y, x]
-            if own >= 0:
-                best = own
-                for k in ti.static(range(4)):
-                    dy, dx = ti.static(((0, 1), (0, -1), (1, 0), (-1, 0))[k])
-                    v, u = y + dy, x + dx
-                    if 0 <= v < self.H and 0 <= u < self.W:
-                        best = ti.max(best, self.label[v, u])
-                if best != own:
-                    self.label[y, x] = best
-                    self.changed[None] = 1
+        """Each labelled pixel takes the largest label of its run along its row (a sweep each
+        way, a thread per row), then along its column: until stable, every 4-connected
+        component gets its largest label."""
+        for y in range(self.H):
+            for way in ti.static(range(2)):
+                run = -1
+                for k in range(self.W):
+                    run = self._carry(y, k if way == 0 else self.W - 1 - k, run)
+        for x in range(self.W):
+            for way in ti.static(range(2)):
+                run = -1
+                for k in range(self.H):
+                    run = self._carry(k if way == 0 else self.H - 1 - k, x, run)
+
+    @ti.func
+    def _carry(self, y, x, run):
+        """A sweep's step: the run's largest label so far, given to (y, x); -1 off it."""
+        own = self.label[y, x]
+        out = -1
+        if own >= 0:
+            out = ti.max(run, own)
+            if out != own:
+                self.label[y, x] = out
+                self.changed[None] = 1
+        return out
 
     @ti.kernel
     def seed(self, sy: ti.i32, sx: ti.i32):
@@ -327,7 +331,6 @@ class InitialRegion:
                 return rounds
         return MAX_ROUNDS
 
-    # ------------------------------------------------------------------ the choices
     def find(self, init, mean, precision, left=None) -> tuple:
         """The initial region for ``init`` (``"auto"``, :class:`Point` or :class:`Box`) as
         ``(ellipse, "left")`` for a box whose centre gives no region, else
@@ -349,10 +352,8 @@ class InitialRegion:
 
     def _check_periodic(self, left):
         """Record the left image's periodic fraction in :attr:`info`; on a periodic image
-        (the test that picks the recovery's periodic parameters, and a box's ellipse), warn
-        :class:`~lss_kernels.recovery.UnreliableStartWarning`.  On the striped stress scenes
-        of seeds 0 and 2 ``auto`` fails on 3 of 8 (``periodic_bg_p6``, seed 0: the stripes
-        have no confident match, and the object's d-bar is 3-5 px off)."""
+        warn :class:`~lss_kernels.recovery.UnreliableStartWarning` (``auto`` fails on 3 of
+        the 8 striped stress scenes of seeds 0 and 2)."""
         import warnings
         from ..recovery import PERIODIC_AREA, UnreliableStartWarning, periodic_fraction
         periodic = periodic_fraction(left)
@@ -399,8 +400,7 @@ class InitialRegion:
         return ellipse, "left"
 
     def _widened(self, radius: int = SPILL, left: int = None) -> np.ndarray:
-        """The labelled pixels widened by ``radius`` (towards the left by ``left`` if given),
-        as a mask."""
+        """The labelled pixels widened by ``radius`` (``left`` to the left), as a mask."""
         self.erode(0)
         self.dilate(radius, radius if left is None else left)
         return self.label.to_numpy() >= 0
@@ -432,8 +432,8 @@ class InitialRegion:
         if sub is None or sub.sum() < NEST_SHARE * mask.sum():
             return mask, near
         info["taken"] = True
-        ys, xs = np.mgrid[0:self.H, 0:self.W]
-        return sub, near & (d - _basis(xs, ys, self.H, self.W) @ inner > CONTRAST)
+        surface = _basis(*np.mgrid[0:self.H, 0:self.W][::-1], self.H, self.W) @ inner
+        return sub, near & (d - surface > CONTRAST)
 
     def _point(self, point):
         H, W = self.H, self.W
