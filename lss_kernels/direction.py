@@ -168,7 +168,7 @@ def estimate_range(left, right) -> dict:
     left-right consistent matches (module text), with a margin.
 
     ``left``, ``right``: float images in [0, 1] of one shape.  Returns ``d_max`` (left-view
-    px, a multiple of 8, at least 16), ``farthest`` (the farthest shift with signal, px),
+    px, a multiple of 8, at least 16 and below the width), ``farthest`` (the farthest shift with signal, px),
     ``matches`` (the pixels kept, at the check's scale) and ``scale``.  Raises ValueError
     when fewer than ``MIN_TEXTURED`` matches are kept (too little texture)."""
     f, gl, gr = _greys(left, right)
@@ -211,8 +211,10 @@ def estimate_range(left, right) -> dict:
     if runs:                                   # the last run's farthest shift above the floor
         last = max(runs, key=lambda r: r[-1])
         above = np.nonzero(hist[last[0]:last[-1] + 1] > floor)[0]
-        farthest = float((last[0] + (above[-1] if above.size else last.size - 1)) * f)
+        farthest = float((last[0] + above[-1] if above.size else last[-1]) * f)
     else:
         farthest = float(np.argmax(hist) * f)
-    d_max = max(16, 8 * math.ceil((1.15 * farthest + 8) / 8))
+    # a multiple of 8 from 16, below the image's width (what lss_kernels.validate accepts)
+    d_max = min(max(16, 8 * math.ceil((1.15 * farthest + 8) / 8)),
+                max(1, 8 * ((W * f - 1) // 8)))
     return {"d_max": d_max, "farthest": farthest, "matches": int(found.size), "scale": f}

@@ -207,6 +207,8 @@ def test_the_estimated_range_of_a_shifted_pair_is_its_shift_with_the_margin():
     assert facts["farthest"] == 12 and facts["scale"] == 1
     assert facts["d_max"] == 24                          # 8 * ceil((1.15 * 12 + 8) / 8)
     assert facts["matches"] > 0.5 * 56 * 196             # most windows match distinctly
+    narrow = direction.estimate_range(*shifted_pair(shift=8, shape=(60, 20), seed=3))
+    assert narrow["farthest"] == 8 and narrow["d_max"] == 16   # 24, but below the width 20
 
 
 @pytest.mark.parametrize("name", ["easy", "slanted"])
