@@ -40,6 +40,7 @@ from ..kernels import lanes
 from ..kernels.distance import INF, DistanceTransform
 from ..kernels.filters import GaussianFilters
 from ..kernels.median import MedianFilter
+from .matching import cost_at
 
 __all__ = ["LevelSet", "Settle", "disparity"]
 
@@ -195,18 +196,9 @@ class LevelSet:
         x0 = ti.min(ti.cast(ti.floor(xf), ti.i32), ti.max(width - 2, 0))
         x1 = ti.min(x0 + 1, width - 1)
         tx = xf - x0
-        a = self._cost_at_pixel(cost, y, x0, c, C)
-        b = self._cost_at_pixel(cost, y, x1, c, C)
+        a = cost_at(cost, y, x0, c, C)
+        b = cost_at(cost, y, x1, c, C)
         return (1.0 - tx) * a + tx * b
-
-    @ti.func
-    def _cost_at_pixel(self, cost: ti.template(), y, x, c, C: ti.template()):
-        """M(x, y, c) at an integer x (a pixel): linear in c only (clamped to the volume)."""
-        kf = ti.min(ti.max(c - 1.0, 0.0), C - 1.0)
-        k0 = ti.min(ti.cast(ti.floor(kf), ti.i32), ti.max(C - 2, 0))
-        k1 = ti.min(k0 + 1, C - 1)
-        tk = kf - k0
-        return (1.0 - tk) * cost[y, x, k0] + tk * cost[y, x, k1]
 
     @ti.kernel
     def _step(self, cost: ti.template(), C: ti.template(), shapes: ti.template(),
@@ -235,7 +227,7 @@ class LevelSet:
                     if x < width:
                         xf = xs[lane]
                         p = self.phi[y, x]
-                        m1 = self._cost_at_pixel(cost, y, x, theta_1[lane], C)
+                        m1 = cost_at(cost, y, x, theta_1[lane], C)
                         m2 = self._cost_at(cost, y, xf - occ.delta_theta[y, x], theta_2[lane], C,
                                            width)
                         dirac = (1.0 / math.pi) / (1.0 + p * p)

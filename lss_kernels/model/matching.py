@@ -22,10 +22,21 @@ import taichi as ti
 
 from ..kernels.backend import FieldPool
 
-__all__ = ["COSTS", "MatchingCost"]
+__all__ = ["COSTS", "MatchingCost", "cost_at"]
 
 #: The matching costs the solver knows (``Params.matching_cost``).
 COSTS = ("ad", "ad_census")
+
+@ti.func
+def cost_at(cost: ti.template(), y, x, c, C: ti.template()):
+    """``cost[y, x, :]`` (a volume of candidates c = 1 .. ``C``) at a real cyclopean c:
+    linear between candidates, clamped to ``[1, C]``."""
+    kf = ti.min(ti.max(c - 1.0, 0.0), C - 1.0)
+    k0 = ti.min(ti.cast(ti.floor(kf), ti.i32), ti.max(C - 2, 0))
+    k1 = ti.min(k0 + 1, C - 1)
+    tk = kf - k0
+    return (1.0 - tk) * cost[y, x, k0] + tk * cost[y, x, k1]
+
 
 #: Census window radius (7x7 window: 48 neighbours, two 32-bit words).
 _RADIUS = 3

@@ -42,6 +42,8 @@ import math
 import numpy as np
 import taichi as ti
 
+from .matching import cost_at
+
 __all__ = ["BackgroundSweep", "FLAT", "MIN_SHARE", "NEAR", "WIDTH", "choose_plane",
            "distinct_dip", "due", "plane_vertex"]
 
@@ -105,15 +107,8 @@ class BackgroundSweep:
 
     @ti.func
     def _z(self, cost: ti.template(), y, x, c):
-        """The standardised cost at real cyclopean c (linear between candidates, clamped to
-        ``[1, c_max]``)."""
-        C = ti.static(self.C)
-        kf = ti.min(ti.max(c - 1.0, 0.0), C - 1.0)
-        k0 = ti.min(ti.cast(ti.floor(kf), ti.i32), ti.max(C - 2, 0))
-        k1 = ti.min(k0 + 1, C - 1)
-        t = kf - k0
-        m = (1.0 - t) * cost[y, x, k0] + t * cost[y, x, k1]
-        return (m - self.centre[y, x]) * self.inv_spread[y, x]
+        """The standardised cost at real cyclopean c (:func:`~.matching.cost_at`)."""
+        return (cost_at(cost, y, x, c, self.C) - self.centre[y, x]) * self.inv_spread[y, x]
 
     @ti.kernel
     def _select(self, cost: ti.template(), shapes: ti.template(), phi: ti.template(),
