@@ -728,7 +728,11 @@ def test_derivatives_and_curvature_match_reference(levelset):
     rng = np.random.default_rng(11)
     phi = _smooth_phi(rng).astype(np.float32)
     levelset.phi.from_numpy(levelset.extent.padded(phi))
-    levelset.derivatives()
+    band, levelset.band = levelset.band, 0.0                  # kappa and N everywhere
+    try:
+        levelset.derivatives()
+    finally:
+        levelset.band = band
     _compare_derivatives(levelset, phi)
 
 
@@ -752,7 +756,7 @@ def _check_derivatives_at_size(phi):
     """A fresh LevelSet of ``phi``'s size against the reference derivatives."""
     from lss_kernels.model.levelset import LevelSet
     pool = FieldPool()
-    ls = LevelSet(pool, *phi.shape, Params())
+    ls = LevelSet(pool, *phi.shape, Params(narrow_band=0))    # kappa and N everywhere
     pool.finalize()
     ls.setup()
     ls.phi.from_numpy(ls.extent.padded(phi.astype(np.float32)))
@@ -794,67 +798,92 @@ class _GivenB:
         return self.b[y, x]
 
 
-@pytest.mark.parametrize("lanes", [None, 1])
-def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
-    """The Eq. 2 step (``_step``, after ``boundary_weight``: B at Theta_1 and the row pass
-    of grad B) and phi's derivatives against the float64 reference, on an image whose width
-    (34) ends in a partial block of lanes; also with blocks of one pixel, the GPUs'
-    layout.  B is a given map here (a stand-in for the boundary costs' ``b_at``)."""
+def _check_step(phi, bands, lanes=None, monkeypatch=None):
+    """The Eq. 2 step (``_step``, after ``derivatives`` and ``boundary_weight``: B at
+    Theta_1 and the row pass of grad B) of a LevelSet of ``phi``'s size against the float64
+    reference, for each narrow band in ``bands`` (phi units; 0: none); also phi's derivatives
+    when there is no band.  B is a given map here (a stand-in for the boundary costs'
+    ``b_at``).  Returns the fraction of pixels outside the last band."""
     from lss_kernels.kernels import lanes as lanes_module
     from lss_kernels.model.levelset import LevelSet
-    if lanes is not None:
-        monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
     from lss_kernels.model.occlusion import OcclusionGeometry
     from lss_kernels.model.shapes import GlobalShapes
+    if lanes is not None:
+        monkeypatch.setattr(lanes_module, "lanes_for_arch", lambda: lanes)
+    h, w = phi.shape
     rng = np.random.default_rng(21)
     p = Params()
     pool = FieldPool()
-    ls = LevelSet(pool, H, W, p)
+    ls = LevelSet(pool, h, w, p)
     assert ls.lanes == (lanes or lanes_module.lanes_for_arch())
-    shapes = GlobalShapes(pool, H, W)
-    occ = OcclusionGeometry(pool, H, W, C)
-    cost = pool.field(ti.f32, (H, W, C))
-    given_b = _GivenB(pool.field(ti.f32, (H, W)))
+    shapes = GlobalShapes(pool, h, w)
+    occ = OcclusionGeometry(pool, h, w, C)
+    cost = pool.field(ti.f32, (h, w, C))
+    given_b = _GivenB(pool.field(ti.f32, (h, w)))
     pool.finalize()
     ls.setup()
     # Theta_1 and Theta_2 in the normalised quadratic basis; their maps at the pixels
     theta = np.array([[0.4, -0.2, 0.3, 1.1, -0.6, 4.5], [0.0, 0.0, -0.2, 0.5, 0.3, 2.2]])
     shapes.set(theta[0], theta[1])
-    y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
     xn, yn = (x - shapes.cx) * shapes.inv_s, (y - shapes.cy) * shapes.inv_s
     basis = np.stack([xn * xn, xn * yn, yn * yn, xn, yn, np.ones_like(xn)])
     th1, th2 = (np.tensordot(t.astype(np.float32), basis, 1) for t in theta)
-    phi = (_smooth_phi(rng) * 2.0).astype(np.float32)
-    b_map = (0.5 + rng.random((H, W))).astype(np.float32)
-    dtheta = rng.uniform(-3.0, 3.0, (H, W)).astype(np.float32)
-    volume = rng.random((H, W, C)).astype(np.float32)
+    phi = phi.astype(np.float32)
+    b_map = (0.5 + rng.random((h, w))).astype(np.float32)
+    dtheta = rng.uniform(-3.0, 3.0, (h, w)).astype(np.float32)
+    volume = rng.random((h, w, C)).astype(np.float32)
     ls.phi.from_numpy(ls.extent.padded(phi))
     given_b.b.from_numpy(b_map)
     occ.delta_theta.from_numpy(occ.extent.padded(dtheta))
     cost.from_numpy(volume)
-    ls.derivatives()
-    _compare_derivatives(ls, phi)
-    ls.boundary_weight(given_b, shapes)
-    np.testing.assert_array_equal(ls.extent.image(ls.b_map), b_map)
     kappa, n_x, n_y = ref.curvature(ref.gaussian_derivatives(phi.astype(np.float64),
                                                              p.curvature_sigma),
                                     p.curvature_clip)
     b_x, b_y = ref.gaussian_derivatives(b_map.astype(np.float64), p.curvature_sigma)[:2]
-    band = 1.0                                     # phi spans about -2 .. 2.4
-    for width in (0.0, band):
-        ls._step(cost, C, shapes, occ, p.dt, p.mu, width)
+    for band in bands:
+        ls.band = band
+        ls.derivatives()
+        if band == 0:
+            _compare_derivatives(ls, phi)
+        ls.boundary_weight(given_b, shapes)
+        ls._step(cost, C, shapes, occ, p.dt, p.mu, band)
         want = ref.levelset_step(phi, volume, th1, th2, dtheta, b_map, b_x, b_y, kappa, n_x,
-                                 n_y, p.dt, p.mu, p.boundary_clip, width)
+                                 n_y, p.dt, p.mu, p.boundary_clip, band)
         got = ls.extent.image(ls.phi_next)
         assert np.abs(got - phi).max() > 0.05      # the step moves phi
         np.testing.assert_allclose(got, want, atol=1e-5)
-    # outside the band phi is kept exactly, inside it moves
-    outside = np.abs(phi) > band
-    assert 0.2 < outside.mean() < 0.8
-    np.testing.assert_array_equal(got[outside], phi[outside])
-    assert np.abs(got - phi)[~outside].min() > 0
+        # outside the band phi is kept exactly, inside it moves
+        outside = np.abs(phi) > band if band > 0 else np.zeros(phi.shape, bool)
+        np.testing.assert_array_equal(got[outside], phi[outside])
+        assert np.abs(got - phi)[~outside].min() > 0
+        # phi_x, whose sign the ray cast reads everywhere, is computed outside the band too
+        np.testing.assert_allclose(ls.image(ls.phi_x),
+                                   ref.gaussian_derivatives(phi.astype(np.float64), 4.0)[0],
+                                   atol=1e-5)
     ls.destroy()
     pool.destroy()
+    return outside.mean()
+
+
+@pytest.mark.parametrize("lanes", [None, 1])
+def test_eq2_step_matches_reference(ti_arch, monkeypatch, lanes):
+    """On an image whose width (34) ends in a partial block of lanes, with and without a
+    band; also with blocks of one pixel, the GPUs' layout."""
+    phi = _smooth_phi(np.random.default_rng(21)) * 2.0     # about -2 .. 2.4
+    assert 0.2 < _check_step(phi, (0.0, 1.0), lanes, monkeypatch) < 0.8
+
+
+@pytest.mark.parametrize("lanes", [None, 1])
+def test_eq2_step_in_a_narrow_band_skips_only_what_it_never_reads(ti_arch, monkeypatch, lanes):
+    """A band of 10.5 px around two discs in a 70 x 101 image, most blocks far from it:
+    the step computes kappa, N, B and the row pass of grad B only within the filters' reach
+    of the band's blocks, and still equals the reference that computes them everywhere."""
+    y, x = np.mgrid[0:70, 0:101]
+    distance = np.maximum(12.0 - np.hypot(x - 30.0, y - 25.0),
+                          9.0 - np.hypot(x - 75.0, (y - 50.0) * 1.4))
+    phi = 0.01 * distance + 0.002 * np.random.default_rng(5).standard_normal(x.shape)
+    assert _check_step(phi, (0.105,), lanes, monkeypatch) > 0.6
 
 
 def test_curvature_of_a_disc_is_minus_one_over_radius(levelset):

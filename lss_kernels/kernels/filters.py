@@ -159,14 +159,26 @@ class GaussianFilters:
                     scratch[m, b] = value
 
     @ti.func
-    def rows(self, src: ti.template(), orders: ti.template()):
+    def rows(self, src: ti.template(), orders: ti.template(), where: ti.template(),
+             outside: ti.template()):
         """The row pass of ``src`` (an ``(H, W)`` plane) for each of ``orders`` (ascending,
         from 0) into the scratch of that order, a block of pixels at a time (a parallel loop:
-        call it at kernel scope)."""
+        call it at kernel scope).  ``where``: None, or a ``(rows, blocks)`` plane whose zeros
+        mark the blocks that get only the orders in ``outside`` (a sub-tuple of ``orders``,
+        possibly empty; the others keep what their scratch held)."""
         height = self.extent.height()
         blocks = (self.extent.width() + self.lanes - 1) // self.lanes
         for y, b in ti.ndrange(*ti.static(self.bucket_blocks)):
             if y < height and b < blocks:
-                out = self.row_filters(src, y, b, orders)
-                for j in ti.static(range(len(orders))):
-                    self._put(self.scratch[orders[j]], y, b, out[j], height)
+                if ti.static(not isinstance(where, ti.Field)):
+                    self._row_block(src, y, b, orders, height)
+                elif where[y, b] != 0:
+                    self._row_block(src, y, b, orders, height)
+                elif ti.static(len(outside) > 0):
+                    self._row_block(src, y, b, outside, height)
+
+    @ti.func
+    def _row_block(self, src: ti.template(), y, b, orders: ti.template(), height):
+        out = self.row_filters(src, y, b, orders)
+        for j in ti.static(range(len(orders))):
+            self._put(self.scratch[orders[j]], y, b, out[j], height)

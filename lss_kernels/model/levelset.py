@@ -102,6 +102,11 @@ class LevelSet:
         plane = lambda: lanes.lane_plane(pool, H, W, self.lanes, bucket=True)
         self.phi_x, self.kappa, self.normal_x, self.normal_y = (plane() for _ in range(4))
         self.filters = GaussianFilters(pool, self.H, self.W, params.curvature_sigma)
+        # the narrow band (0: none) and the blocks of lanes that its step reads (mark_band)
+        self.band = float(params.narrow_band * params.phi_scale)
+        self.reach = lanes.block_count(self.filters.half, self.lanes)
+        block = lambda: pool.field(ti.i8, (H, lanes.block_count(W, self.lanes)), bucket=True)
+        self.in_band, self.near_rows, self.near = block(), block(), block()
         self.median = MedianFilter(pool, self.H, self.W, params.median_size)
         self.flipped = pool.field(ti.i32, (), bucket=True)
         self.changed = pool.field(ti.i32, (), bucket=True)
@@ -139,21 +144,26 @@ class LevelSet:
         """Along y, a block of pixels at a time: the five derivatives of phi from the
         row-filtered scratch, and from them phi_x, the clipped curvature
         kappa = div(grad phi / |grad phi|) and the normal N = grad phi / |grad phi| (phi_y and
-        the second derivatives are used here only).  Lanes past the right edge hold values
-        of the reflected image: block kernels compute with them but never store them as
-        pixels."""
+        the second derivatives are used here only), kappa and N in the band's blocks only
+        (:meth:`mark_band`; elsewhere they keep older values, which the step never reads).
+        Lanes past the right edge hold values of the reflected image: block kernels compute
+        with them but never store them as pixels."""
         clip = self.curvature_clip
         for y, b in self.kappa:
             if y < self.extent.height() and b < self._blocks():
-                py, pyy = self.filters.columns(0, y, b, (1, 2))
-                px, pxy = self.filters.columns(1, y, b, (0, 1))
-                pxx = self.filters.columns(2, y, b, (0,))[0]
-                norm = ti.sqrt(px * px + py * py) + 1e-10
-                k = (pxx * py * py - 2.0 * px * py * pxy + pyy * px * px) / (norm * norm * norm)
-                self.phi_x[y, b] = px
-                self.kappa[y, b] = ti.min(ti.max(k, -clip), clip)
-                self.normal_x[y, b] = px / norm
-                self.normal_y[y, b] = py / norm
+                if self.in_band[y, b] != 0:
+                    py, pyy = self.filters.columns(0, y, b, (1, 2))
+                    px, pxy = self.filters.columns(1, y, b, (0, 1))
+                    pxx = self.filters.columns(2, y, b, (0,))[0]
+                    norm = ti.sqrt(px * px + py * py) + 1e-10
+                    k = (pxx * py * py - 2.0 * px * py * pxy + pyy * px * px) / \
+                        (norm * norm * norm)
+                    self.phi_x[y, b] = px
+                    self.kappa[y, b] = ti.min(ti.max(k, -clip), clip)
+                    self.normal_x[y, b] = px / norm
+                    self.normal_y[y, b] = py / norm
+                else:       # the ray cast reads phi_x's sign everywhere
+                    self.phi_x[y, b] = self.filters.columns(1, y, b, (0,))[0]
 
     @ti.func
     def _blocks(self):
@@ -161,10 +171,47 @@ class LevelSet:
         return (self.extent.width() + self.lanes - 1) // self.lanes
 
     @ti.kernel
-    def derivatives(self):
-        """phi_x, kappa and N from the current phi (both passes in one launch)."""
-        self.filters.rows(self.phi, (0, 1, 2))
+    def _derivatives(self):
+        self.filters.rows(self.phi, (0, 1, 2), self.near_rows, (1,))
         self._columns_curvature()
+
+    def derivatives(self):
+        """The band's blocks (:meth:`mark_band`), then phi_x everywhere and kappa and N in
+        the band (both filter passes in one launch)."""
+        self.mark_band(self.band)
+        self._derivatives()
+
+    @ti.kernel
+    def mark_band(self, band: ti.f32):
+        """The blocks of lanes that the Eq. 2 step reads, from the current phi: ``in_band``,
+        those with a pixel inside the band (|phi| <= ``band``; all when ``band`` is 0), the
+        only ones whose phi the step moves; ``near_rows``, those within the filters'
+        half-width of an in-band block in its column (where the column passes of kappa, N
+        and grad B read the row-filtered scratch); ``near``, those within the row pass's
+        reach of a ``near_rows`` block in its row (where it reads B).  Elsewhere the step
+        keeps phi exactly, so kappa, N, B and the row pass of grad B are left out there."""
+        L, half, reach = ti.static(self.lanes, self.filters.half, self.reach)
+        height, width, blocks = self.extent.height(), self.extent.width(), self._blocks()
+        for y, b in self.in_band:
+            if y < height and b < blocks:
+                inside = 0
+                for lane in range(L):
+                    x = b * L + lane
+                    if x < width and (band <= 0 or ti.abs(self.phi[y, x]) <= band):
+                        inside = 1
+                self.in_band[y, b] = ti.cast(inside, ti.i8)
+        for y, b in self.near_rows:
+            if y < height and b < blocks:
+                near = 0
+                for k in range(ti.max(y - half, 0), ti.min(y + half + 1, height)):
+                    near = ti.max(near, ti.cast(self.in_band[k, b], ti.i32))
+                self.near_rows[y, b] = ti.cast(near, ti.i8)
+        for y, b in self.near:
+            if y < height and b < blocks:
+                near = 0
+                for k in range(ti.max(b - reach, 0), ti.min(b + reach + 1, blocks)):
+                    near = ti.max(near, ti.cast(self.near_rows[y, k], ti.i32))
+                self.near[y, b] = ti.cast(near, ti.i8)
 
     # ---------------------------------------------------------------- boundary weight
     # ---------------------------------------------------------------- boundary weight
@@ -173,7 +220,7 @@ class LevelSet:
         L = ti.static(self.lanes)
         width = self.extent.width()
         for y, b in self.kappa:
-            if y < self.extent.height() and b < self._blocks():
+            if y < self.extent.height() and b < self._blocks() and self.near[y, b] != 0:
                 theta_1 = shapes.value(0, lanes.columns(b, L), ti.cast(y, ti.f32))
                 for lane in range(L):
                     x = b * L + lane
@@ -183,9 +230,10 @@ class LevelSet:
     @ti.kernel
     def boundary_weight(self, costs: ti.template(), shapes: ti.template()):
         """B(x, y, Theta_1(x, y)) and the row pass of its gradient (the column pass runs in
-        the Eq. 2 step, which alone needs grad B), in one launch."""
+        the Eq. 2 step, which alone needs grad B), in one launch; where the step reads them
+        (:meth:`mark_band`, after :meth:`derivatives`)."""
         self._b_map(costs, shapes)
-        self.filters.rows(self.b_map, (0, 1))
+        self.filters.rows(self.b_map, (0, 1), self.near_rows, ())
 
     # ---------------------------------------------------------------- Eq. 2
     @ti.func
@@ -206,12 +254,18 @@ class LevelSet:
         """phi_next from phi by Eq. 2, a block of pixels at a time: the boundary term for the
         whole block (grad B is the column pass of the separable filters, whose row pass ran
         in :meth:`boundary_weight`), then each pixel's data term; phi where |phi| > ``band``
-        (> 0; 0: no band) is kept."""
+        (> 0; 0: no band) is kept, and the blocks without such a pixel are copied
+        (:meth:`mark_band` ran with the same ``band``)."""
         clip = self.boundary_clip
         L = ti.static(self.lanes)
         width = self.extent.width()
         for y, b in self.kappa:
-            if y < self.extent.height() and b < self._blocks():
+            if y < self.extent.height() and b < self._blocks() and self.in_band[y, b] == 0:
+                for lane in range(L):
+                    x = b * L + lane
+                    if x < width:
+                        self.phi_next[y, x] = self.phi[y, x]
+            elif y < self.extent.height() and b < self._blocks():
                 b_x = self.filters.columns(1, y, b, (0,))[0]
                 b_y = self.filters.columns(0, y, b, (1,))[0]
                 b_map = lanes.block(self.b_map, y, b, L, width)
@@ -288,8 +342,7 @@ class LevelSet:
     def evolve(self, cost, c_max, shapes, occ, params, reinit):
         """One descent step of Eq. 2, then (every ``reinit_every``) the signed-distance
         re-initialisation and the median filter (:meth:`settle`)."""
-        self._step(cost, c_max, shapes, occ, params.dt, params.mu,
-                   params.narrow_band * params.phi_scale)
+        self._step(cost, c_max, shapes, occ, params.dt, params.mu, self.band)
         if reinit:
             self.reinitialise(self.phi_next)
         self.settle(shapes)
