@@ -13,7 +13,8 @@ the data term is weak and noisy (a dark, low-contrast layer) its small imbalance
 hundreds of iterations until the sign flips far inside a region, opening holes in an object
 that no boundary ever reached.  Inside the band the step is the paper's; outside it phi keeps
 its value (a narrow-band level set, Adalsteinsson and Sethian 1995), so regions change only by
-moving their boundary.  Derivatives are separable Gaussian-derivative filters
+moving their boundary; kappa, N, B and grad B are computed only in the blocks of pixels whose
+step reads them (``_mark_band``), phi_x everywhere (the ray cast reads its sign).  Derivatives are separable Gaussian-derivative filters
 (``curvature_sigma``, symmetric borders: the Neumann condition of Eq. 2;
 :mod:`lss_kernels.kernels.filters`); kappa is clipped to +-``curvature_clip`` and the boundary
 term to +-``boundary_clip``.  M is the size-3 patch cost (level 1 of the hierarchy) read with
@@ -102,7 +103,7 @@ class LevelSet:
         plane = lambda: lanes.lane_plane(pool, H, W, self.lanes, bucket=True)
         self.phi_x, self.kappa, self.normal_x, self.normal_y = (plane() for _ in range(4))
         self.filters = GaussianFilters(pool, self.H, self.W, params.curvature_sigma)
-        # the narrow band (0: none) and the blocks of lanes that its step reads (mark_band)
+        # the narrow band (0: none) and the blocks of lanes that its step reads (_mark_band)
         self.band = float(params.narrow_band * params.phi_scale)
         self.reach = lanes.block_count(self.filters.half, self.lanes)
         block = lambda: pool.field(ti.i8, (H, lanes.block_count(W, self.lanes)), bucket=True)
@@ -145,7 +146,7 @@ class LevelSet:
         row-filtered scratch, and from them phi_x, the clipped curvature
         kappa = div(grad phi / |grad phi|) and the normal N = grad phi / |grad phi| (phi_y and
         the second derivatives are used here only), kappa and N in the band's blocks only
-        (:meth:`mark_band`; elsewhere they keep older values, which the step never reads).
+        (:meth:`_mark_band`; elsewhere they keep older values, which the step never reads).
         Lanes past the right edge hold values of the reflected image: block kernels compute
         with them but never store them as pixels."""
         clip = self.curvature_clip
@@ -171,18 +172,18 @@ class LevelSet:
         return (self.extent.width() + self.lanes - 1) // self.lanes
 
     @ti.kernel
-    def _derivatives(self):
+    def _derivatives(self, band: ti.f32):
+        self._mark_band(band)
         self.filters.rows(self.phi, (0, 1, 2), self.near_rows, (1,))
         self._columns_curvature()
 
     def derivatives(self):
-        """The band's blocks (:meth:`mark_band`), then phi_x everywhere and kappa and N in
-        the band (both filter passes in one launch)."""
-        self.mark_band(self.band)
-        self._derivatives()
+        """The band's blocks (:meth:`_mark_band`), then phi_x everywhere and kappa and N in
+        the band's blocks (one launch)."""
+        self._derivatives(self.band)
 
-    @ti.kernel
-    def mark_band(self, band: ti.f32):
+    @ti.func
+    def _mark_band(self, band):
         """The blocks of lanes that the Eq. 2 step reads, from the current phi: ``in_band``,
         those with a pixel inside the band (|phi| <= ``band``; all when ``band`` is 0), the
         only ones whose phi the step moves; ``near_rows``, those within the filters'
@@ -231,7 +232,7 @@ class LevelSet:
     def boundary_weight(self, costs: ti.template(), shapes: ti.template()):
         """B(x, y, Theta_1(x, y)) and the row pass of its gradient (the column pass runs in
         the Eq. 2 step, which alone needs grad B), in one launch; where the step reads them
-        (:meth:`mark_band`, after :meth:`derivatives`)."""
+        (:meth:`_mark_band`, after :meth:`derivatives`)."""
         self._b_map(costs, shapes)
         self.filters.rows(self.b_map, (0, 1), self.near_rows, ())
 
@@ -255,7 +256,7 @@ class LevelSet:
         whole block (grad B is the column pass of the separable filters, whose row pass ran
         in :meth:`boundary_weight`), then each pixel's data term; phi where |phi| > ``band``
         (> 0; 0: no band) is kept, and the blocks without such a pixel are copied
-        (:meth:`mark_band` ran with the same ``band``)."""
+        (:meth:`_mark_band` ran with the same ``band``)."""
         clip = self.boundary_clip
         L = ti.static(self.lanes)
         width = self.extent.width()
