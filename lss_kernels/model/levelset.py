@@ -14,10 +14,10 @@ hundreds of iterations until the sign flips far inside a region, opening holes i
 that no boundary ever reached.  Inside the band the step is the paper's; outside it phi keeps
 its value (a narrow-band level set, Adalsteinsson and Sethian 1995), so regions change only by
 moving their boundary; kappa, N, B and grad B are computed only in the blocks of pixels whose
-step reads them (``_mark_band``), phi_x everywhere (the ray cast reads its sign).  Derivatives are separable Gaussian-derivative filters
-(``curvature_sigma``, symmetric borders: the Neumann condition of Eq. 2;
-:mod:`lss_kernels.kernels.filters`); kappa is clipped to +-``curvature_clip`` and the boundary
-term to +-``boundary_clip``.  M is the size-3 patch cost (level 1 of the hierarchy) read with
+step reads them (``_mark_band``), phi_x everywhere (the ray cast reads its sign).
+Derivatives are separable Gaussian-derivative filters (``curvature_sigma``, symmetric
+borders: the Neumann condition of Eq. 2; :mod:`lss_kernels.kernels.filters`); kappa is clipped
+to +-``curvature_clip`` and the boundary term to +-``boundary_clip``.  M is the size-3 patch cost (level 1 of the hierarchy) read with
 linear interpolation in x and c.  After every step phi is median-filtered (``median_size``
 squared, symmetric borders; :mod:`lss_kernels.kernels.median`) and every ``reinit_every`` steps
 re-initialised to ``phi_scale`` times a signed distance (the re-initialisation comes first, as
@@ -214,7 +214,6 @@ class LevelSet:
                     near = ti.max(near, ti.cast(self.near_rows[y, k], ti.i32))
                 self.near[y, b] = ti.cast(near, ti.i8)
 
-    # ---------------------------------------------------------------- boundary weight
     # ---------------------------------------------------------------- boundary weight
     @ti.func
     def _b_map(self, costs: ti.template(), shapes: ti.template()):
