@@ -184,3 +184,40 @@ def test_scene_times_solves_a_scene_three_times_with_the_same_answer(tmp_path, f
     assert lines[4].startswith("| a | 64x48 | ")
     assert lines[-1].startswith(f"| **median** | | {row['first']:.2f} | {row['again']:.2f} | "
                                 f"{row['iterations']} |")
+
+
+def test_kernel_profile_sums_each_kernels_loops_per_iteration():
+    """``demos/kernel_profile.py``: a kernel's loops are summed, its launches are those of
+    its most frequent loop, Taichi's host reads of fields are one row."""
+    kp = _demo("kernel_profile")
+    records = [("_step_c144_0_kernel_0_serial", 0.5), ("_step_c144_0_kernel_1_range_for", 1.0),
+               ("_step_c144_0_kernel_0_serial", 0.5), ("_step_c144_0_kernel_1_range_for", 3.0),
+               ("fit_c188_0_kernel_1_range_for", 1.0), ("fit_c188_0_kernel_1_range_for", 1.0),
+               ("snode_reader_546_kernel_0_serial", 0.0)]
+    rows = kp.summarise(records, iterations=2)
+    assert [r["kernel"] for r in rows] == ["_step", "fit", "(host reads of a field)"]
+    assert rows[0]["ms"] == pytest.approx(2.5) and rows[0]["launches"] == 1.0
+    assert rows[0]["share"] == pytest.approx(5.0 / 7.0)
+    assert rows[1]["ms"] == pytest.approx(1.0) and rows[2]["launches"] == 0.5
+    lines = kp.table(rows, 4.0, "cpu").splitlines()
+    assert lines[0] == "Per iteration on cpu: 4.00 ms wall, 3.50 ms in kernels (2.5 launches)."
+    assert lines[4] == "| _step | 2.500 | 1.0 | 71.4 % |"
+    with pytest.raises(ValueError, match="scene folder or one of"):
+        kp.load("no_such_scene")
+
+
+@pytest.mark.slow
+def test_kernel_profile_times_the_iterations_kernels(ti_arch):
+    """A profiled run of the tiny scene: the Eq. 2 step and the derivatives launch once per
+    iteration and take time; the profiler is switched off again afterwards (its kernels
+    compile apart)."""
+    from lss_kernels.kernels import backend
+    kp = _demo("kernel_profile")
+    try:
+        rows, wall = kp.profile(kp.load("tiny"), ti_arch, warmup=2, iterations=3)
+    finally:
+        backend.init(arch=ti_arch, kernel_profiler=False)
+    by_kernel = {r["kernel"]: r for r in rows}
+    for name in ("_step", "_derivatives", "upward", "downward"):
+        assert by_kernel[name]["launches"] == 1.0 and by_kernel[name]["ms"] > 0
+    assert wall > 0 and sum(r["share"] for r in rows) == pytest.approx(1.0)

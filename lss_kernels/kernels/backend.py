@@ -1,8 +1,6 @@
-"""The one place that initialises Taichi.
-
-The library never calls ``ti.init`` on import: entry points (the CLI, demos, benchmarks, the
-pytest fixture) call :func:`init` once.  Kernels compiled by the solver are cached on disk by
-Taichi's offline cache so that a second run of the CLI skips most of the compile time.
+"""The one place that initialises Taichi: entry points (the CLI, demos, benchmarks, the pytest
+fixture) call :func:`init` once; the library never calls ``ti.init`` on import.  Taichi's
+offline cache keeps compiled kernels on disk, so a second run skips most of the compiling.
 """
 import gc
 import os
@@ -27,7 +25,6 @@ _live = weakref.WeakSet()
 #: ``[y, x, c - 1]``.  At 760x340x50 an iteration took 34.6 -> 29.0 ms on the 2-core CPU.
 ROWS_DISPARITIES_COLUMNS = (0, 2, 1)
 
-
 #: GPU backends that ``"gpu"`` tries, in order.
 GPU_ARCHES = ("cuda", "vulkan", "metal")
 
@@ -46,7 +43,7 @@ def _library_present(arch: str) -> bool:
             ctypes.CDLL(name)
             return True
         except OSError:
-            continue
+            pass
     return False
 
 
@@ -105,9 +102,8 @@ def _stderr_line(text):
 
 
 def init(arch: str | None = None, threads: int | None = None, offline_cache: bool = True,
-         debug: bool = False, reuse_kernels: bool | None = None) -> str:
-    """Initialise Taichi once per process and return the backend in use (``"cpu"``,
-    ``"cuda"``, ...).
+         debug: bool = False, reuse_kernels: bool | None = None, kernel_profiler=None) -> str:
+    """Initialise Taichi once per process; returns the backend in use (``"cpu"``, ...).
 
     Parameters
     ----------
@@ -125,6 +121,9 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
         alive (:func:`fresh_numbering`), so that it loads the kernels compiled for its size
         bucket from the offline cache; ``False`` if you keep Taichi fields of your own
         between solves.  ``None`` keeps the current setting (default ``True``).
+    kernel_profiler : bool or None
+        Time every kernel on the device (``ti.profiler``, ``demos/kernel_profile.py``; the
+        kernels compile again under it).  ``None`` keeps the current setting (``False``).
 
     Calling again with the same settings is a no-op; different settings re-initialise Taichi
     (every field allocated before becomes invalid, so do this before building a solver).
@@ -138,11 +137,13 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
     if reuse_kernels is not None:
         _state["reuse"] = bool(reuse_kernels)
     arch = resolve(arch, log=_stderr_line)
-    if _state["arch"] == arch and _state["threads"] == threads:
+    on = bool((_state["kwargs"] or {}).get("kernel_profiler"))
+    profiling = on if kernel_profiler is None else bool(kernel_profiler)
+    if _state["arch"] == arch and _state["threads"] == threads and on == profiling:
         return arch
     kwargs = dict(arch=getattr(ti, arch), offline_cache=offline_cache, debug=debug,
                   default_fp=ti.f32, log_level=ti.WARN, random_seed=0,
-                  unrolling_limit=0)
+                  unrolling_limit=0, kernel_profiler=profiling)
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
     if kwargs["arch"] == ti.cpu:
