@@ -201,18 +201,23 @@ class LevelSet:
                     if x < width and (band <= 0 or ti.abs(self.phi[y, x]) <= band):
                         inside = 1
                 self.in_band[y, b] = ti.cast(inside, ti.i8)
-        for y, b in self.near_rows:
+        self._widen(self.in_band, self.near_rows, 0, half)
+        self._widen(self.near_rows, self.near, 1, reach)
+
+    @ti.func
+    def _widen(self, src: ti.template(), dst: ti.template(), axis: ti.template(),
+               reach: ti.template()):
+        """``dst`` marks the blocks within ``reach`` of a block marked in ``src`` along
+        ``axis`` (0: its column of blocks, 1: its row); a parallel loop."""
+        height, blocks = self.extent.height(), self._blocks()
+        for y, b in dst:
             if y < height and b < blocks:
+                i, n = (y, height) if ti.static(axis == 0) else (b, blocks)
                 near = 0
-                for k in range(ti.max(y - half, 0), ti.min(y + half + 1, height)):
-                    near = ti.max(near, ti.cast(self.in_band[k, b], ti.i32))
-                self.near_rows[y, b] = ti.cast(near, ti.i8)
-        for y, b in self.near:
-            if y < height and b < blocks:
-                near = 0
-                for k in range(ti.max(b - reach, 0), ti.min(b + reach + 1, blocks)):
-                    near = ti.max(near, ti.cast(self.near_rows[y, k], ti.i32))
-                self.near[y, b] = ti.cast(near, ti.i8)
+                for k in range(ti.max(i - reach, 0), ti.min(i + reach + 1, n)):
+                    v, u = (k, b) if ti.static(axis == 0) else (y, k)
+                    near = ti.max(near, ti.cast(src[v, u], ti.i32))
+                dst[y, b] = ti.cast(near, ti.i8)
 
     # ---------------------------------------------------------------- boundary weight
     @ti.func

@@ -27,6 +27,7 @@ __all__ = ["COSTS", "MatchingCost", "cost_at"]
 #: The matching costs the solver knows (``Params.matching_cost``).
 COSTS = ("ad", "ad_census")
 
+
 @ti.func
 def cost_at(cost: ti.template(), y, x, c, C: ti.template()):
     """``cost[y, x, :]`` (a volume of candidates c = 1 .. ``C``) at a real cyclopean c:
