@@ -1,6 +1,6 @@
 """Whole ``lss solve --scene`` processes of two commits, timed side by side in one run.
 
-    python demos/side_by_side.py --base REV [--dataset DIR] [--scenes N] [--out FILE]
+    python demos/side_by_side.py --base REV [--dataset DIR] [--scenes N] [--init START] [--out FILE]
 
 The base commit's package is exported with ``git archive`` into a temporary folder and run
 through its own ``lss`` entry point (read from its ``pyproject.toml``) with the interpreter
@@ -8,7 +8,9 @@ and packages of this environment; the working tree is the other side.  A warm-up
 each side once on every scene (so both find their kernels in Taichi's offline cache), then
 each scene is solved by both sides, alternating which goes first.  The machine's noise
 hits both sides alike; the table gives per-scene wall seconds of the whole process,
-iterations and occlusion F1 of each, and the median ratio.
+iterations and occlusion F1 of each, and the median ratio.  ``--init gt-box`` (or
+``gt-point``, ``auto``) starts both from the bounding box (centroid) of each scene's true
+foreground, or finds the object, instead of the scene's ellipse: a user's box or click.
 """
 import argparse
 import json
@@ -39,17 +41,34 @@ def entry_point(tree: Path) -> tuple:
     return module, function
 
 
-def solve(tree: Path, scene: Path, out: Path, arch: str) -> dict:
-    """One ``lss solve --scene`` process of ``tree``'s package: wall seconds, iterations
-    and occlusion F1 (from its summary.json).  It runs in ``out``'s parent, so that the
-    working directory cannot shadow ``tree`` on ``sys.path``."""
+def start(scene: Path, init: str) -> list:
+    """The ``--init`` arguments of ``lss solve`` for ``init``: none for ``scene`` (its own
+    ellipse), ``auto``, or a point / box from the scene's true foreground (fg_left.png, as
+    ``lss eval --init gt-point / gt-box`` places them)."""
+    if init == "scene":
+        return []
+    if init == "auto":
+        return ["--init", "auto"]
+    import imageio.v3 as iio
+    import numpy as np
+    ys, xs = np.nonzero(iio.imread(scene / "fg_left.png") > 127)
+    if init == "gt-point":
+        return ["--init", f"point:{xs.mean():.2f},{ys.mean():.2f}"]
+    return ["--init", f"box:{xs.min()},{ys.min()},{xs.max() + 1},{ys.max() + 1}"]
+
+
+def solve(tree: Path, scene: Path, out: Path, arch: str, init: str = "scene") -> dict:
+    """One ``lss solve --scene`` process of ``tree``'s package (started as ``init`` says,
+    see :func:`start`): wall seconds, iterations and occlusion F1 (from its summary.json).
+    It runs in ``out``'s parent, so that the working directory cannot shadow ``tree`` on
+    ``sys.path``."""
     out.parent.mkdir(parents=True, exist_ok=True)
     module, function = entry_point(tree)
     code = f"import sys; from {module} import {function} as m; sys.exit(m(sys.argv[1:]))"
     env = dict(os.environ, PYTHONPATH=str(tree))
     start = time.perf_counter()
     done = subprocess.run([sys.executable, "-c", code, "solve", "--scene", str(scene),
-                           "--out", str(out), "--arch", arch, "--quiet"],
+                           "--out", str(out), "--arch", arch, "--quiet"] + start(scene, init),
                           env=env, cwd=out.parent, capture_output=True, text=True)
     seconds = time.perf_counter() - start
     if done.returncode != 0:
@@ -67,6 +86,9 @@ def main(argv=None) -> int:
                         help="folder of scene folders (default: ../shared/data/paper15)")
     parser.add_argument("--scenes", type=int, default=0, help="only the first N scenes")
     parser.add_argument("--arch", default="cpu")
+    parser.add_argument("--init", choices=("scene", "gt-box", "gt-point", "auto"),
+                        default="scene", help="the start of both sides (default: each "
+                        "scene's ellipse)")
     parser.add_argument("--no-warmup", action="store_true",
                         help="skip the unmeasured pass (the caches are already warm)")
     parser.add_argument("--out", help="write the table (markdown) here too")
@@ -84,26 +106,28 @@ def main(argv=None) -> int:
             for scene in scenes:
                 for name, tree in sides.items():
                     print(f"warm-up {name} {scene.name}", file=sys.stderr, flush=True)
-                    solve(tree, scene, tmp / "warm", args.arch)
+                    solve(tree, scene, tmp / "warm", args.arch, args.init)
         rows = []
         for i, scene in enumerate(scenes):
             order = ["base", "head"] if i % 2 == 0 else ["head", "base"]
             row = {"scene": scene.name}
             for name in order:
-                row[name] = solve(sides[name], scene, tmp / name / "out", args.arch)
+                row[name] = solve(sides[name], scene, tmp / name / "out", args.arch,
+                                  args.init)
             rows.append(row)
             print(f"{scene.name}: base {row['base']['seconds']:.1f} s, head "
                   f"{row['head']['seconds']:.1f} s", file=sys.stderr, flush=True)
-    table = render(rows, args.base)
+    table = render(rows, args.base, args.init)
     print(table)
     if args.out:
         Path(args.out).write_text(table)
     return 0
 
 
-def render(rows, base: str) -> str:
-    lines = [f"Whole `lss solve --scene` processes, warm caches, base = `{base}`, head = the "
-             "working tree (`demos/side_by_side.py`)", "",
+def render(rows, base: str, init: str = "scene") -> str:
+    started = "" if init == "scene" else f", `--init {init}`"
+    lines = [f"Whole `lss solve --scene` processes{started}, warm caches, base = `{base}`, "
+             "head = the working tree (`demos/side_by_side.py`)", "",
              "| scene | base s | head s | speed-up | base iterations | head iterations "
              "| base F1 | head F1 |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:

@@ -134,6 +134,21 @@ def test_side_by_side_table_has_per_scene_ratios_and_medians():
     assert lines[-1] == "| **median** (F1: mean) | 9.0 | 5.0 | 2.00 | 300 | 120 | 0.700 | 0.700 |"
 
 
+def test_side_by_side_starts_from_the_true_foregrounds_box_or_centroid(tmp_path):
+    import imageio.v3 as iio
+    sbs = _side_by_side()
+    fg = np.zeros((20, 30), np.uint8)
+    fg[4:10, 6:21] = 255                        # rows 4..9, columns 6..20
+    iio.imwrite(tmp_path / "fg_left.png", fg)
+    assert sbs.start(tmp_path, "scene") == []
+    assert sbs.start(tmp_path, "auto") == ["--init", "auto"]
+    assert sbs.start(tmp_path, "gt-box") == ["--init", "box:6,4,21,10"]
+    assert sbs.start(tmp_path, "gt-point") == ["--init", "point:13.00,6.50"]
+    rows = [{"scene": "a", "base": {"seconds": 2.0, "iterations": 200, "f1": 0.5},
+             "head": {"seconds": 1.0, "iterations": 60, "f1": 0.5}}]
+    assert "processes, `--init gt-box`, warm caches" in sbs.render(rows, "x", "gt-box")
+
+
 def test_side_by_side_exports_a_commit_and_finds_its_entry_point(tmp_path):
     sbs = _side_by_side()
     if not (sbs.ROOT / ".git").exists():
