@@ -66,11 +66,11 @@ def solve(tree: Path, scene: Path, out: Path, arch: str, init: str = "scene") ->
     module, function = entry_point(tree)
     code = f"import sys; from {module} import {function} as m; sys.exit(m(sys.argv[1:]))"
     env = dict(os.environ, PYTHONPATH=str(tree))
-    start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-c", code, "solve", "--scene", str(scene),
-                           "--out", str(out), "--arch", arch, "--quiet"] + start(scene, init),
-                          env=env, cwd=out.parent, capture_output=True, text=True)
-    seconds = time.perf_counter() - start
+    command = [sys.executable, "-c", code, "solve", "--scene", str(scene), "--out", str(out),
+               "--arch", arch, "--quiet"] + start(scene, init)
+    began = time.perf_counter()
+    done = subprocess.run(command, env=env, cwd=out.parent, capture_output=True, text=True)
+    seconds = time.perf_counter() - began
     if done.returncode != 0:
         raise RuntimeError(f"{tree.name} on {scene.name} failed (exit {done.returncode}):\n"
                            f"{done.stderr[-2000:]}")

@@ -3,6 +3,7 @@ pure helpers."""
 import argparse
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -147,6 +148,22 @@ def test_side_by_side_starts_from_the_true_foregrounds_box_or_centroid(tmp_path)
     rows = [{"scene": "a", "base": {"seconds": 2.0, "iterations": 200, "f1": 0.5},
              "head": {"seconds": 1.0, "iterations": 60, "f1": 0.5}}]
     assert "processes, `--init gt-box`, warm caches" in sbs.render(rows, "x", "gt-box")
+
+    # a solve passes the start on to its process and reads the process's summary
+    import types
+    seen = []
+
+    def run(command, **kwargs):
+        seen.append(command)
+        out = Path(command[command.index("--out") + 1])
+        out.mkdir(parents=True)
+        (out / "summary.json").write_text(json.dumps({"iterations": 60,
+                                                      "score": {"occ_f1": 0.9}}))
+        return types.SimpleNamespace(returncode=0, stderr="")
+    sbs.subprocess = types.SimpleNamespace(run=run)
+    got = sbs.solve(sbs.ROOT, tmp_path, tmp_path / "head" / "out", "cpu", "gt-box")
+    assert seen[0][-2:] == ["--init", "box:6,4,21,10"] and "solve" in seen[0]
+    assert got["iterations"] == 60 and got["f1"] == 0.9 and got["seconds"] >= 0
 
 
 def test_side_by_side_exports_a_commit_and_finds_its_entry_point(tmp_path):
