@@ -43,18 +43,16 @@ def entry_point(tree: Path) -> tuple:
 
 def start(scene: Path, init: str) -> list:
     """The ``--init`` arguments of ``lss solve`` for ``init``: none for ``scene`` (its own
-    ellipse), ``auto``, or a point / box from the scene's true foreground (fg_left.png, as
-    ``lss eval --init gt-point / gt-box`` places them)."""
-    if init == "scene":
-        return []
-    if init == "auto":
-        return ["--init", "auto"]
-    import imageio.v3 as iio
-    import numpy as np
-    ys, xs = np.nonzero(iio.imread(scene / "fg_left.png") > 127)
+    ellipse), ``auto``, or the point / box that ``lss eval --init gt-point / gt-box`` places
+    from the scene's true foreground (:func:`lss_kernels.apps.evaluate.scene_start`)."""
+    if init in ("scene", "auto"):
+        return [] if init == "scene" else ["--init", "auto"]
+    from lss_kernels import io
+    from lss_kernels.apps.evaluate import scene_start
+    place, _ = scene_start(io.load_scene(scene), init)
     if init == "gt-point":
-        return ["--init", f"point:{xs.mean():.2f},{ys.mean():.2f}"]
-    return ["--init", f"box:{xs.min()},{ys.min()},{xs.max() + 1},{ys.max() + 1}"]
+        return ["--init", f"point:{place.x:.2f},{place.y:.2f}"]
+    return ["--init", f"box:{place.x0:g},{place.y0:g},{place.x1:g},{place.y1:g}"]
 
 
 def solve(tree: Path, scene: Path, out: Path, arch: str, init: str = "scene") -> dict:

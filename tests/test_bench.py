@@ -137,8 +137,10 @@ def test_side_by_side_table_has_per_scene_ratios_and_medians():
 
 def test_side_by_side_starts_from_the_true_foregrounds_box_or_centroid(tmp_path):
     import imageio.v3 as iio
+    from lss_kernels.scenes import write_scene
     sbs = _side_by_side()
-    fg = np.zeros((20, 30), np.uint8)
+    write_scene(tmp_path, "tiny")               # 64 x 48; its mask replaced by a known one
+    fg = np.zeros((48, 64), np.uint8)
     fg[4:10, 6:21] = 255                        # rows 4..9, columns 6..20
     iio.imwrite(tmp_path / "fg_left.png", fg)
     assert sbs.start(tmp_path, "scene") == []
