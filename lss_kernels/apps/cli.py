@@ -24,7 +24,10 @@ from ..kernels.backend import ARCHES, DEFAULT_ARCH  # noqa: E402
 
 __all__ = ["main"]
 
-SUBCOMMAND_MODULES = ("demo", "evaluate", "bench", "batch")
+#: The other commands and the modules that define them (``add_cli``), imported only when
+#: their command runs or the full help is asked for: ``lss solve`` does not import the
+#: pictures' matplotlib, OpenCV or Dask before it needs them.
+SUBCOMMAND_MODULES = {"demo": "demo", "eval": "evaluate", "bench": "bench", "batch": "batch"}
 
 
 class CliError(Exception):
@@ -202,21 +205,33 @@ def main_solve(args):
     return 0
 
 
-def build_parser():
+def build_parser(command=None):
+    """The ``lss`` parser; with ``command`` (a name of :data:`SUBCOMMAND_MODULES` or
+    "solve") only that command's sub-parser, else all of them."""
     parser = argparse.ArgumentParser(
         prog="lss", description="Two-layer level-set stereo with exact occlusion geometry "
                                 "(Wang & Zickler), as data-parallel Taichi kernels.")
     parser.add_argument("--version", action="version", version=f"lss_kernels {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    _add_solve(sub)
-    for name in SUBCOMMAND_MODULES:
-        module = importlib.import_module(f"lss_kernels.apps.{name}")
-        module.add_cli(sub)
+    if command in (None, "solve"):
+        _add_solve(sub)
+    for name, module_name in SUBCOMMAND_MODULES.items():
+        if command in (None, name):
+            importlib.import_module(f"lss_kernels.apps.{module_name}").add_cli(sub)
     return parser
 
 
+def _command(argv):
+    """The command named by ``argv`` when it is a known one, else None (the full parser
+    then lists every command in its help or its error)."""
+    words = [a for a in argv if not a.startswith("-")]
+    known = ("solve", *SUBCOMMAND_MODULES)
+    return words[0] if words and words[0] in known and argv[0] == words[0] else None
+
+
 def main(argv=None):
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_command(argv) if argv else None)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
