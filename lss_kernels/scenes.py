@@ -8,18 +8,21 @@ point is named by the left-view coordinates ``(x, y)`` of its ray.  Its right-vi
 ``x - d_S(x, y)`` (same row), and its colour is a texture sampled at ``(x, y)``, so one scene point
 has one colour in both views.
 
-Both views are ray cast per pixel: the left pixel ``(x, y)`` sees the foreground where
-``(x, y)`` is inside the ellipse, else the background; the right pixel ``(xr, y)`` finds, on each
-surface, the point that projects to it (the root of the quadratic ``x - d_S(x, y) = xr``) and keeps
-the nearer one (larger disparity).  The ground truth is therefore exact for the rendered images:
-``disp_left`` is ``d_S`` at the pixel centres, and a left pixel is occluded (``occ_left``) when
-its point is not seen by the right camera: it projects outside the right image
-(``xr < -0.5``) or the foreground covers its right-view ray.
+Both views are ray cast per pixel, with a z-buffer: the left pixel ``(x, y)`` sees the nearest
+surface (larger disparity) that holds ``(x, y)`` (the foreground inside its ellipse); the right
+pixel ``(xr, y)`` finds, on each surface, the point that projects to it (the root of the
+quadratic ``x - d_S(x, y) = xr``) and keeps the nearest.  The ground truth is therefore exact
+for the rendered images: ``disp_left`` is ``d_S`` at the pixel centres, and a left pixel is
+occluded (``occ_left``) when its point is not seen by the right camera: it projects outside
+the right image (``xr < -0.5``) or a nearer surface covers its right-view ray.
 
 Textures (:data:`TEXTURES`, per layer): ``"random"`` value noise (the default),
 ``"low_contrast"`` value noise of a few grey levels around a brightness, ``"stripes"`` (a sinusoid
 of a given period and orientation) and ``"palette"`` (blobs coloured from a given palette, for
 camouflage: give both layers the same palette).
+
+``SceneSpec.props`` adds surfaces behind the object (boxes, a floor meeting the wall, a shelf):
+each view shows the nearest surface on each ray, and the ground truth counts them as background.
 
 Presets (:data:`PRESETS`): ``"easy"`` (128x96, fronto-parallel layers at 24 and 8 px),
 ``"slanted"`` (128x96, curved slanted foreground over a slanted background) and ``"tiny"``
@@ -133,6 +136,13 @@ class SceneSpec:
         Shape of the foreground (:data:`OUTLINES`) in the box of ``ellipse``.
     d_max_step : int
         ``d_max`` is rounded up to a multiple of this.
+    props : tuple of dict
+        Further surfaces behind the object, which the ground truth counts as background
+        (clutter, a floor, a shelf): each a dict with ``d`` (as ``d_bg``), ``box`` (``(cx, cy,
+        rx, ry)`` of its ``outline``, default ``"rectangle"``; None or absent: the whole plane,
+        seen where it is nearer than the rest, e.g. a floor that meets the wall) and
+        ``texture`` (as ``texture_bg``).  Both views show the nearest surface on each ray;
+        inside the object's outline every prop must lie behind the object.
     """
 
     width: int = 128
@@ -150,6 +160,7 @@ class SceneSpec:
     texture_bg: dict | str | None = None
     outline: str = "ellipse"
     d_max_step: int = 2
+    props: tuple = ()
 
 
 #: Named scenes: keyword overrides of :class:`SceneSpec`.
@@ -296,8 +307,9 @@ def _stripes(rng, p: dict, cells, box: tuple):
     return lookup
 
 
-def _check(spec: SceneSpec, theta_fg, theta_bg, ellipse, pad: int) -> None:
-    """The scene must be a valid two-layer scene on the rendered domain."""
+def _check(spec: SceneSpec, surfaces: list, ellipse, pad: int) -> None:
+    """The scene must be a valid two-layer scene on the rendered domain: ``surfaces`` are
+    the background, the props and the object (:func:`_geometry`)."""
     if spec.width < 8 or spec.height < 8:
         raise ValueError(f"width, height: expected at least 8 pixels, got {spec.width}x{spec.height}")
     if ellipse[2] <= 0 or ellipse[3] <= 0:
@@ -308,11 +320,13 @@ def _check(spec: SceneSpec, theta_fg, theta_bg, ellipse, pad: int) -> None:
         raise ValueError(f"d_max_step: expected a positive integer, got {spec.d_max_step}")
     if not 0.0 <= spec.noise <= 1.0:
         raise ValueError(f"noise: expected a standard deviation in [0, 1], got {spec.noise}")
+    names = ["d_bg", *(f"props[{i}]: d" for i in range(len(spec.props))), "d_fg"]
     y, x = np.mgrid[0:spec.height, -pad:spec.width + pad].astype(np.float64)
-    for theta, name in ((theta_fg, "d_fg"), (theta_bg, "d_bg")):
-        d = _disparity(theta, x, y)
-        dx = 2 * theta[0] * x + theta[1] * y + theta[3]
-        if d[:, pad:-pad].min() < 0:
+    for i, (surface, name) in enumerate(zip(surfaces, names)):
+        d = _disparity(surface.theta, x, y)
+        dx = 2 * surface.theta[0] * x + surface.theta[1] * y + surface.theta[3]
+        # a whole-plane prop is only seen where it is nearer than the background
+        if (i == 0 or surface.box is not None) and d[:, pad:-pad].min() < 0:
             raise ValueError(f"{name}: disparity must be >= 0 in the image, min is "
                              f"{d[:, pad:-pad].min():.3g}")
         if dx.max() >= 0.9:
@@ -322,22 +336,91 @@ def _check(spec: SceneSpec, theta_fg, theta_bg, ellipse, pad: int) -> None:
     inside = _inside(ellipse, x, y, spec.outline)
     if not inside.any():
         raise ValueError(f"ellipse: {ellipse} covers no pixel of the {spec.width}x{spec.height} image")
-    if (_disparity(theta_fg, x, y) <= _disparity(theta_bg, x, y))[inside].any():
-        raise ValueError("d_fg, d_bg: the foreground must be in front of the background "
-                         "(larger disparity) everywhere inside the outline")
+    d_fg = _disparity(surfaces[-1].theta, x, y)
+    for surface, name in zip(surfaces[:-1], names):
+        behind = ~surface.covers(x, y) | (_disparity(surface.theta, x, y) < d_fg)
+        if not behind[inside].all():
+            what = "background" if name == "d_bg" else f"prop ({name[:-3]})"
+            raise ValueError(f"d_fg, {name}: the foreground must be in front of the {what} "
+                             f"(larger disparity) everywhere inside the outline")
+
+
+@dataclass(frozen=True)
+class _Surface:
+    """A rendered surface: disparity coefficients on U, and the outline that bounds it in
+    surface (left-view) coordinates (``box`` None: the whole plane)."""
+
+    theta: np.ndarray
+    box: tuple | None = None
+    outline: str = "rectangle"
+
+    def covers(self, x, y):
+        """Whether the surface holds the points ``(x, y)`` (NaN: a ray that misses it)."""
+        return np.isfinite(x) if self.box is None else _inside(self.box, x, y, self.outline)
+
+
+_PROP_KEYS = ("d", "box", "outline", "texture")
+
+
+def _props(spec: SceneSpec) -> list:
+    """The :class:`_Surface` of each of ``spec.props``, checked."""
+    surfaces = []
+    for i, prop in enumerate(spec.props):
+        name = f"props[{i}]"
+        if not isinstance(prop, dict) or "d" not in prop:
+            raise ValueError(f"{name}: expected a dict with 'd' and any of 'box', 'outline', "
+                             f"'texture', got {prop!r}")
+        unknown = sorted(set(prop) - set(_PROP_KEYS))
+        if unknown:
+            raise ValueError(f"{name}: unknown key(s) {', '.join(unknown)}; valid: "
+                             f"{', '.join(_PROP_KEYS)}")
+        box = prop.get("box")
+        if box is not None:
+            box = tuple(float(v) for v in box)
+            if len(box) != 4 or not box[2] > 0 or not box[3] > 0:
+                raise ValueError(f"{name}: box: expected (cx, cy, rx, ry) with radii > 0, "
+                                 f"got {prop['box']!r}")
+        outline = prop.get("outline", "rectangle")
+        if outline not in OUTLINES:
+            raise ValueError(f"{name}: outline: unknown {outline!r}; valid: {', '.join(OUTLINES)}")
+        surfaces.append(_Surface(_theta(prop["d"], f"{name}: d"), box, outline))
+    return surfaces
 
 
 def _geometry(spec: SceneSpec) -> tuple:
-    """``(theta_fg, theta_bg, ellipse, pad)`` of a spec, checked (``ValueError`` if it is not
-    a valid two-layer scene)."""
+    """``(surfaces, ellipse, pad)`` of a spec, checked (``ValueError`` if it is not a valid
+    scene): the background, the props, then the object, as :class:`_Surface`."""
     w, h = int(spec.width), int(spec.height)
-    theta_fg, theta_bg = _theta(spec.d_fg, "d_fg"), _theta(spec.d_bg, "d_bg")
     ellipse = tuple(float(v) for v in (spec.ellipse if spec.ellipse is not None
                                        else (w / 2, h / 2, 0.25 * w, 0.29 * h)))
+    surfaces = [_Surface(_theta(spec.d_bg, "d_bg")), *_props(spec),
+                _Surface(_theta(spec.d_fg, "d_fg"), ellipse, spec.outline)]
     y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-    pad = int(math.ceil(max(np.abs(_disparity(t, x, y)).max() for t in (theta_fg, theta_bg)))) + 4
-    _check(spec, theta_fg, theta_bg, ellipse, pad)
-    return theta_fg, theta_bg, ellipse, pad
+    pad = int(math.ceil(max(np.abs(_disparity(s.theta, x, y)).max() for s in surfaces))) + 4
+    _check(spec, surfaces, ellipse, pad)
+    return surfaces, ellipse, pad
+
+
+def _nearest(surfaces: list, y, source):
+    """The z-buffer over rays: per ray, the index of the nearest surface that holds its point
+    on the ray, that point's left-view x and its disparity (larger is nearer).
+    ``source(surface)`` gives the left-view x of each ray's point on a surface (NaN: none)."""
+    xs = source(surfaces[0])
+    index, d = np.zeros(y.shape, np.int64), _disparity(surfaces[0].theta, xs, y)
+    for k, surface in enumerate(surfaces[1:], 1):
+        xk = source(surface)
+        dk = _disparity(surface.theta, xk, y)
+        take = surface.covers(xk, y) & (dk > d)
+        index, xs, d = np.where(take, k, index), np.where(take, xk, xs), np.where(take, dk, d)
+    return index, xs, d
+
+
+def _paint(textures: list, index, xs, y):
+    """The colour of each ray's point: the texture of its surface ``index`` at ``(xs, y)``."""
+    colour = textures[0](xs, y)
+    for k, texture in enumerate(textures[1:], 1):
+        colour = np.where((index == k)[..., None], texture(xs, y), colour)
+    return colour
 
 
 def check_scene(**params) -> None:
@@ -379,37 +462,38 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
                          f"valid: seed, {', '.join(sorted(names))}")
     spec = replace(SceneSpec(**PRESETS.get(preset, {})), **params)
     w, h = int(spec.width), int(spec.height)
-    theta_fg, theta_bg, ellipse, pad = _geometry(spec)
+    surfaces, ellipse, pad = _geometry(spec)
+    theta_bg, theta_fg = surfaces[0].theta, surfaces[-1].theta
     y, x = np.mgrid[0:h, 0:w].astype(np.float64)
 
     rng = np.random.default_rng(seed)
     box = (-pad, -1.0, w + pad, h + 1.0)
     tex_fg = _texture(rng, spec.texture_fg, spec.texture_cells, box, "texture_fg")
     tex_bg = _texture(rng, spec.texture_bg, spec.texture_cells, box, "texture_bg")
+    textures = [tex_bg, *(_texture(rng, prop.get("texture"), spec.texture_cells, box,
+                                   f"props[{i}]: texture")
+                          for i, prop in enumerate(spec.props)), tex_fg]
+    on_object = len(surfaces) - 1
 
-    # Left view: the pixel's own ray.
-    fg = _inside(ellipse, x, y, spec.outline)
-    d_left = np.where(fg, _disparity(theta_fg, x, y), _disparity(theta_bg, x, y))
-    left = np.where(fg[..., None], tex_fg(x, y), tex_bg(x, y))
+    # Left view: the nearest surface on the pixel's own ray.
+    seen, _, d_left = _nearest(surfaces, y, lambda surface: x)
+    fg = seen == on_object
+    left = _paint(textures, seen, x, y)
 
-    # Right view: the point of each surface on the ray, the nearer one wins (z-buffer).
-    xs_bg, xs_fg = _source_x(theta_bg, x, y), _source_x(theta_fg, x, y)
-    if np.isnan(xs_bg).any():
+    # Right view: on each ray, the point of each surface that projects to it (the root of
+    # x - d(x, y) = xr); the nearest one wins.
+    if np.isnan(_source_x(theta_bg, x, y)).any():
         raise ValueError("d_bg: the background does not cover the right view; reduce its "
                          "curvature")
-    fg_right = _inside(ellipse, xs_fg, y, spec.outline) & (
-        _disparity(theta_fg, xs_fg, y) > _disparity(theta_bg, xs_bg, y))
-    xs = np.where(fg_right, xs_fg, xs_bg)
-    right = np.where(fg_right[..., None], tex_fg(xs, y), tex_bg(xs, y))
+    seen_right, xs, _ = _nearest(surfaces, y, lambda surface: _source_x(surface.theta, x, y))
+    right = _paint(textures, seen_right, xs, y)
 
-    # Occlusion: the left pixel's point projects outside the right image, or the right view's
-    # z-buffer picks the other surface on its right-view ray.
+    # Occlusion: the left pixel's point projects outside the right image, or another surface
+    # is nearer on its right-view ray.
     xr = x - d_left
-    xs_fg, xs_bg = _source_x(theta_fg, xr, y), _source_x(theta_bg, xr, y)
-    covered_bg = ~fg & _inside(ellipse, xs_fg, y, spec.outline) & (
-        _disparity(theta_fg, xs_fg, y) > d_left)
-    covered_fg = fg & (_disparity(theta_bg, xs_bg, y) >= d_left)
-    occ = (xr < -0.5) | covered_bg | covered_fg
+    seen_there, _, d_there = _nearest(surfaces, y,
+                                      lambda surface: _source_x(surface.theta, xr, y))
+    occ = (xr < -0.5) | ((seen_there != seen) & (d_there > d_left))
 
     left, right = (_finish(img, spec, rng) for img in (left, right))
     roi_fg, roi_bg = band_from_foreground(fg, spec.band_radius)

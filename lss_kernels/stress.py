@@ -1,6 +1,6 @@
 """A stress set of hard rendered two-layer scenes with exact ground truth.
 
-Eight families (:data:`STRESS_FAMILIES`) of four scenes each, rendered by
+Nine families (:data:`STRESS_FAMILIES`) of four scenes each, rendered by
 :mod:`lss_kernels.scenes` into scene folders (``docs/scene-format.md``): periodic stripes,
 camouflage, weak and dark textures, curved backgrounds, wide occlusions, poor starts,
 non-elliptic outlines and small jumps.  Geometry is given for the ``"medium"`` size
@@ -44,6 +44,8 @@ STRESS_FAMILIES = {
     "init": "hand ellipses covering about half of the object or spilling 30 % beyond it",
     "shape": "non-elliptic outlines: a rectangle, an L and a blob",
     "fine": "small disparity jumps (3-7 px): occlusion strips a few pixels wide",
+    "clutter": "surfaces behind the object that one quadratic cannot follow: a floor meeting "
+               "a wall, an object standing on the floor, boxes, a shelf's step",
 }
 
 #: Image sizes (width, height); the families' geometry is written for "medium".
@@ -195,9 +197,39 @@ def _fine(rng) -> list:
     ]
 
 
+def _floor(d_wall: float, y_meet: float, slope: float, cy: float) -> dict:
+    """A floor as a whole-plane prop: its disparity rises by ``slope`` per row below the row
+    ``y_meet``, where it meets a wall at ``d_wall``; given about the object's centre row
+    ``cy`` (medium pixels)."""
+    return {"d": {"d": d_wall + slope * (cy - y_meet), "slope": (0.0, slope)}, "box": None}
+
+
+def _clutter(rng) -> list:
+    """As :func:`_periodic`; ``props`` in medium pixels (:func:`_placed` scales them)."""
+    return [
+        ("floor_wall", "a floor rising from 10 to 22 px meets a wall at 10 px below the "
+                       "object, which floats at 34 px",
+         {"d_fg": 34, "d_bg": 10, "props": [_floor(10.0, 140.0, 0.12, 120.0)]}),
+        ("standing", "a box standing on a floor that meets the wall at 10 px: 2 px in front "
+                     "of the floor where it stands, 18 px in front of the wall at its top",
+         {"d_fg": 28.5, "d_bg": 10, "outline": "rectangle", "ellipse": (165.0, 130.0, 45.0, 80.0),
+          "props": [_floor(10.0, 100.0, 0.15, 130.0)]}),
+        ("boxes", "three boxes at 14-22 px in front of a wall at 8 px, one under the "
+                  "object's occlusion strip",
+         {"d_fg": 36, "d_bg": 8,
+          "props": [{"d": 18, "box": (60.0, 150.0, 30.0, 40.0)},
+                    {"d": 22, "box": (265.0, 70.0, 35.0, 30.0)},
+                    {"d": 14, "box": (150.0, 218.0, 60.0, 18.0), "outline": "ellipse"}]}),
+        ("shelf", "a shelf at 20 px over the left 130 px of a wall at 8 px; the object at "
+                  "38 px stands across the shelf's edge",
+         {"d_fg": 38, "d_bg": 8, "ellipse": (180.0, 120.0, 70.0, 75.0),
+          "props": [{"d": 20, "box": (65.0, 120.0, 65.0, 125.0)}]}),
+    ]
+
+
 _FAMILY_SCENES = {"periodic": _periodic, "camouflage": _camouflage, "weak": _weak_family,
                   "curved": _curved, "jump": _jump, "init": _init, "shape": _shape,
-                  "fine": _fine}
+                  "fine": _fine, "clutter": _clutter}
 
 
 def _layer(value, scale: float, centre) -> tuple:
@@ -221,6 +253,11 @@ def _placed(params: dict, rng, scale: float) -> dict:
     hand_scale = rng.uniform(0.9, 1.05)
     hand_shift = (rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05))
     shift = params.pop("init_shift", hand_shift)
+    props = [{**prop, "d": _layer(prop["d"], scale, centre),
+              "box": None if prop.get("box") is None else tuple(v * scale for v in prop["box"])}
+             for prop in params.pop("props", ())]
+    if props:
+        params["props"] = tuple(props)
     return {**params,
             "d_fg": _layer(params["d_fg"], scale, centre),
             "d_bg": _layer(params["d_bg"], scale, centre),

@@ -219,3 +219,53 @@ def test_stripes_texture_is_periodic_along_x():
 def test_texture_and_outline_errors(kwargs, message):
     with pytest.raises(ValueError, match=message):
         make_scene("easy", **kwargs)
+
+
+# ------------------------------------------------------------------------------ props
+def test_a_box_behind_the_object_is_seen_and_hidden_as_the_z_buffer_says():
+    """A box at 16 px between the object (24 px) and the wall (8 px): integer disparities, so
+    every visible left pixel lands on a right pixel of its colour; the object's strip over
+    the box is 8 px wide, over the wall 16 px; the box hides 8 px of the wall on its left."""
+    box = (41.0, 60.0, 15.0, 20.0)             # x 26..56, y 40..80
+    scene = make_scene("easy", seed=2, props=({"d": 16.0, "box": box},), outline="rectangle",
+                       ellipse=(80.0, 48.0, 24.0, 30.0))   # x 56..104, y 18..78
+    y, x = _grid(scene)
+    on_box = (np.abs(x - 41) <= 15) & (np.abs(y - 60) <= 20) & ~scene.fg_left
+    np.testing.assert_array_equal(scene.disp_left, np.where(
+        scene.fg_left, 24.0, np.where(on_box, 16.0, 8.0)))
+    xr = x - scene.disp_left.astype(int)
+    visible = ~scene.occ_left
+    np.testing.assert_allclose(scene.left[visible], scene.right[y[visible], xr[visible]],
+                               atol=1e-5)
+    assert np.flatnonzero(scene.occ_left[70, 30:]).tolist() == list(range(18, 26))  # 48..55
+    assert np.flatnonzero(scene.occ_left[30, 30:]).tolist() == list(range(10, 26))  # 40..55
+    # the box's strip on the wall, after the wall's own strip at the left border (x - 8 < 0)
+    assert np.flatnonzero(scene.occ_left[50, :30]).tolist() == list(range(8)) + list(range(18, 26))
+    s = score(scene.disp_left, scene.occ_left, scene)
+    assert (s["occ_f1"], s["bad4"]) == (1.0, 0.0)
+
+
+def test_a_floor_meets_the_wall_where_it_comes_nearer():
+    floor = {"d": disparity_coefficients(8.0, slope=(0.0, 0.25), centre=(0.0, 60.0)),
+             "box": None}                        # 8 px at row 60, 17 px at the bottom
+    scene = make_scene("easy", seed=1, props=(floor,), ellipse=(64.0, 30.0, 20.0, 16.0))
+    y, x = _grid(scene)
+    want = np.where(scene.fg_left, 24.0, np.maximum(8.0, 8.0 + 0.25 * (y - 60.0)))
+    np.testing.assert_allclose(scene.disp_left, want, atol=1e-5)
+    assert scene.d_max == 26.0                  # the object is still the nearest
+    s = score(scene.disp_left, scene.occ_left, scene)
+    assert (s["occ_f1"], s["bad4"]) == (1.0, 0.0)
+
+
+@pytest.mark.parametrize("props, message", [
+    (({"d": 30.0, "box": (64.0, 48.0, 10.0, 10.0)},),
+     r"d_fg, props\[0\]: d: the foreground must be in front of the prop \(props\[0\]\)"),
+    (({"d": 10.0, "colour": 1},), r"props\[0\]: unknown key\(s\) colour"),
+    (({"box": None},), r"props\[0\]: expected a dict with 'd'"),
+    (({"d": 10.0, "box": (1.0, 2.0, 0.0, 3.0)},), r"props\[0\]: box: expected \(cx, cy, rx, ry\)"),
+    (({"d": 10.0, "outline": "star"},), r"props\[0\]: outline: unknown 'star'"),
+    (({"d": -3.0, "box": (20.0, 20.0, 5.0, 5.0)},), r"props\[0\]: d: disparity must be >= 0"),
+])
+def test_prop_errors_name_the_prop(props, message):
+    with pytest.raises(ValueError, match=message):
+        make_scene("easy", props=props)

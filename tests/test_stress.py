@@ -139,6 +139,30 @@ def test_small_jumps(scenes):
     assert scenes["fine_thin"].fg_left.sum(axis=1).max() < 16
 
 
+def test_clutter_backgrounds_are_not_one_quadratic(scenes):
+    """No quadratic fits the clutter family's visible background within 0.5 px (the small
+    size halves the jumps), and the object's strip changes width along its edge: over a box,
+    a shelf or a floor it is the jump to them."""
+    clutter = [s for s in scenes.values() if s.meta["family"] == "clutter"]
+    assert len(clutter) == 4
+    for scene in clutter:
+        bg = ~scene.fg_left & ~scene.occ_left
+        y, x = np.nonzero(bg)
+        u = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], -1).astype(np.float64)
+        d = scene.disp_left[bg].astype(np.float64)
+        residual = d - u @ np.linalg.lstsq(u, d, rcond=None)[0]
+        assert np.abs(residual).max() > 0.5, scene.name
+        widths = []
+        for row in np.flatnonzero(scene.fg_left.sum(axis=1) >= 8):
+            edge = np.flatnonzero(scene.fg_left[row])[0]
+            run = 0
+            while run < edge and scene.occ_left[row, edge - 1 - run]:
+                run += 1
+            widths.append(run)
+        if scene.name != "clutter_floor_wall":      # its floor stays below the object
+            assert max(widths) - min(widths) >= 3, (scene.name, widths)
+
+
 def test_init_family_starts(scenes):
     """Half covers: about half of the object; spills: the whole object and 30 % more."""
     for name, (lo, hi) in {"init_half_inside": (0.4, 0.6), "init_half_side": (0.35, 0.65)}.items():
@@ -193,7 +217,8 @@ def test_command_line(tmp_path, capsys):
 #: weak_bg_dark; the small periodic scenes are at the edge of what the solver does).
 FAMILY_FLOORS = {"camouflage_noise_noisy": 0.85, "curved_ball_dark": 0.8,
                  "init_spill30": 0.9, "jump_60_far": 0.95, "shape_L": 0.85,
-                 "weak_bg_dark": 0.9, "periodic_both_p7": 0.45, "fine_jump5_far": 0.84}
+                 "weak_bg_dark": 0.9, "periodic_both_p7": 0.45, "fine_jump5_far": 0.84,
+                 "clutter_boxes": 0.85}
 
 
 @pytest.mark.slow
