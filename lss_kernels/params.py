@@ -119,6 +119,15 @@ class Params:
         box (left-view pixels).
     refine_ratio : float
         Peak-ratio threshold of a distinct match in the refinement (in (0, 1]).
+    strip_window : (int, int)
+        ``(near, far)``: after the refinement every occluded strip of the output is measured
+        again, as the jump from the foreground at its edge to the background where the right
+        camera sees it again, the background's quadratic there offset by the median of the
+        refined minus the quadratic disparity over the background pixels ``near`` to ``far``
+        left-view pixels beyond the strip
+        (:meth:`~lss_kernels.model.occlusion.OcclusionGeometry.measure_strips`): one
+        quadratic cannot follow a box, a shelf or a floor beside the object.  ``(0, 0)``:
+        the strips of the two quadratics, the paper's; so it is without ``refine``.
     message_ambiguity : float
         0: a patch's message weighs 1 / sigma_p^2 (Eq. 5).  > 0: also times its cost
         curve's distinctness ``clip((1 - r) / message_ambiguity, 0, 1)``, ``r`` the peak
@@ -178,6 +187,7 @@ class Params:
     refine: bool = True
     refine_passes: tuple = ((24, 7, 8), (4, 4, 2))
     refine_ratio: float = 0.9
+    strip_window: tuple = (6, 20)
     message_ambiguity: float = 0.0
     recover: bool = True
     photometric: bool = True
@@ -246,6 +256,11 @@ class Params:
             for p in v), "a tuple of (range, window, smoothing) triples of integers in "
             "[1, 64]")
         need("refine_ratio", lambda v: finite(v) and 0 < v <= 1, "a number in (0, 1]")
+        need("strip_window", lambda v: v == (0, 0) or (
+            isinstance(v, tuple) and len(v) == 2
+            and all(isinstance(k, int) and not isinstance(k, bool) for k in v)
+            and 0 <= v[0] and v[0] + 2 <= v[1] <= 64),
+            "(0, 0) or (near, far), integers with 0 <= near, near + 2 <= far <= 64")
         need("message_ambiguity", lambda v: finite(v) and 0 <= v <= 1,
              "a number in [0, 1] (0: off)")
         if not isinstance(self.recover, bool):
@@ -265,4 +280,5 @@ class Params:
         d = dataclasses.asdict(self)
         d["patch_sizes"] = list(self.patch_sizes)
         d["refine_passes"] = [list(p) for p in self.refine_passes]
+        d["strip_window"] = list(self.strip_window)
         return d

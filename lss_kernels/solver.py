@@ -63,7 +63,8 @@ class Solver:
         2)``; one more for a pair searched from 0 px, :mod:`lss_kernels.model.offset`).
     init : tuple ``(cx, cy, rx, ry)``, boolean array ``(H, W)``, ``"auto"``, Point or Box
         Initial foreground: an ellipse or a mask, in the frame ``init_frame``; or found from
-        the first consensus (:mod:`lss_kernels.model.init`; ``init_info`` says what was chosen).
+        the first consensus (:mod:`lss_kernels.model.init`; ``init_info`` says what was chosen,
+        ``initial_left`` holds it as a left-view mask).
     params : Params, optional
     arch : str, optional
         Taichi arch; initialises Taichi if given (else uses the current one, or the CPU).
@@ -365,25 +366,28 @@ class Solver:
 
     # ------------------------------------------------------------------ outputs
     def left_view(self, refine=False):
-        """Left-view ``(disparity, occlusion, foreground)`` of the current model; with
-        ``refine``, the refined disparity (:mod:`lss_kernels.model.refine`; the disparity
-        itself without ``params.refine``) comes fourth."""
+        """Left-view ``(disparity, occlusion, foreground)`` of the model; with ``refine`` the
+        refined disparity (:mod:`lss_kernels.model.refine`; without ``params.refine``, the
+        disparity) comes fourth and the strips are measured against it (``strip_window``)."""
         self.occ.render_left(self.shapes, self.levelset.phi)
-        # the model's left view and disparities -> the user's (lss_kernels.model.offset)
-        user = lambda plane: to_user_left(self.extent.image(plane), self.shift)
+        planes = [self.occ.disparity_left, self.occ.disparity_left]
+        if refine and self.refinement is not None:
+            t0 = time.perf_counter()
+            self.refinement.run(self.left, self.right, self.occ.disparity_left,
+                                self.occ.foreground_left, self.occ.occlusion_left,
+                                self.d_max + self.offset)
+            if self.params.strip_window[1] > 0:
+                self.occ.measure_strips(self.refinement.surface, self.refinement.weight,
+                                        *self.params.strip_window)
+            ti.sync()
+            self.timings["refine"] = time.perf_counter() - t0
+            planes[1] = self.refinement.surface
+        user = lambda plane: to_user_left(self.extent.image(plane), self.shift)  # user frame
         clean = lambda d: np.clip(np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0)
                                   - self.offset, 0.0, self.d_max).astype(np.float32)
-        out = (clean(user(self.occ.disparity_left)), user(self.occ.occlusion_left).astype(bool),
+        out = (clean(user(planes[0])), user(self.occ.occlusion_left).astype(bool),
                user(self.occ.foreground_left).astype(bool))
-        if not refine or self.refinement is None:
-            return out + (out[0],) if refine else out
-        t0 = time.perf_counter()
-        self.refinement.run(self.left, self.right, self.occ.disparity_left,
-                            self.occ.foreground_left, self.occ.occlusion_left,
-                            self.d_max + self.offset)
-        ti.sync()
-        self.timings["refine"] = time.perf_counter() - t0
-        return out + (clean(user(self.refinement.surface)),)
+        return out + (clean(user(planes[1])),) if refine else out
 
     def consensus(self):
         """Consensus mean and sigma, cyclopean frame, left-view disparity units."""
@@ -399,12 +403,8 @@ class Solver:
         mean, sigma = self.consensus()
         return dict(phi=self.extent.image(self.levelset.phi), consensus_mean=mean,
                     consensus_sigma=sigma, disparity=disparity, occlusion=occlusion,
-                    foreground=foreground, initial_foreground=self.initial_foreground_left(),
+                    foreground=foreground, initial_foreground=self.initial_left,
                     D=2.0 * self.extent.image(self.levelset.D) - self.offset)
-
-    def initial_foreground_left(self):
-        """The initial foreground in the left view."""
-        return self.initial_left
 
     def patch_curve(self, level, x, y):
         """Everything about one patch (cyclopean ``x, y``; ``level`` indexes

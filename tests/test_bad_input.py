@@ -337,6 +337,9 @@ def test_parse_init_reads_ellipses_and_masks(tmp_path):
     ("median_size", 4, r"1, 3, 5 or 7"),
     ("patch_sizes", (3, 8), r"a tuple of increasing integers >= 2, each a multiple of the "
                             r"one before"),
+    *(("strip_window", v, r"\(0, 0\) or \(near, far\), integers with 0 <= near, "
+                          r"near \+ 2 <= far <= 64")
+      for v in ((6, 7), (-1, 20), (6, 80), (6.0, 20), [6, 20])),
 ])
 def test_params_out_of_range(name, value, expected):
     with pytest.raises(ValueError, match=rf"^params\.{name}: expected {expected}, got "):

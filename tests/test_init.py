@@ -219,7 +219,7 @@ def _inits(scene):
 def test_each_kind_finds_the_rendered_object(easy, kind):
     scene, solver = easy
     solver.reset(scene.left, scene.right, scene.d_max, _inits(scene)[kind])
-    start = solver.initial_foreground_left()
+    start = solver.initial_left
     assert _iou(start, scene.fg_left) >= 0.5
     assert solver.init_info["kind"] == kind and solver.init_info["seconds"] > 0
     result = solver.run()
@@ -236,7 +236,7 @@ def test_auto_finds_an_object_3_px_in_front(easy):
     _, solver = easy
     scene = make_scene("easy", seed=1, d_fg=11.0, d_bg=8.0)
     solver.reset(scene.left, scene.right, solver.d_max, "auto")
-    assert _iou(solver.initial_foreground_left(), scene.fg_left) >= 0.8
+    assert _iou(solver.initial_left, scene.fg_left) >= 0.8
     assert solver.init_info["background_fit"]["start"].startswith("the pixels that are not")
     scene = make_scene("easy", seed=1, d_fg=10.0, d_bg=8.0)
     with pytest.raises(InitError, match="no foreground found"):
@@ -295,7 +295,7 @@ def slanted(ti_arch):
 def test_each_kind_starts_on_the_slanted_object(slanted, kind):
     scene, solver = slanted
     solver.reset(scene.left, scene.right, scene.d_max, _inits(scene)[kind])
-    assert _iou(solver.initial_foreground_left(), scene.fg_left) >= 0.5
+    assert _iou(solver.initial_left, scene.fg_left) >= 0.5
     assert solver.init_info["kind"] == kind
 
 

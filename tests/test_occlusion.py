@@ -4,6 +4,7 @@ import pytest
 import taichi as ti
 
 from lss_kernels.reference import kernels as ref
+from lss_kernels.reference import refine as after
 from lss_kernels.kernels.backend import FieldPool
 
 H, W, C = 12, 64, 16
@@ -131,3 +132,105 @@ def test_occluded_strip_is_as_wide_as_a_whole_pixel_jump_whatever_the_rounding(g
             first = np.flatnonzero(fg)[0]
             assert first == (27 if offset > 0 else 28)
             assert np.flatnonzero(occl).tolist() == list(range(first - 3, first)), (eps, offset)
+
+
+# ------------------------------------------------------------ strips against the refined map
+def _strips(geometry, fg, surface, refined, matched=None, near=6, far=20):
+    """``measure_strips`` on hand-made left-view planes (``matched``: every pixel if None);
+    returns the occlusion mask and the numpy specification's."""
+    occ = geometry[0]
+    matched = np.ones(fg.shape, bool) if matched is None else matched
+    occ.foreground_left.from_numpy(occ.extent.padded(fg.astype(np.int32)))
+    occ.disparity_left.from_numpy(occ.extent.padded(surface.astype(np.float32)))
+    # two spare planes hold the refined map and the matched pixels
+    occ.delta_theta.from_numpy(occ.extent.padded(refined.astype(np.float32)))
+    occ.phi_plus.from_numpy(occ.extent.padded(matched.astype(np.float32)))
+    occ.measure_strips(occ.delta_theta, occ.phi_plus, near, far)
+    got = occ.extent.image(occ.occlusion_left).astype(bool)
+    return got, after.occluded_strips(fg, surface, refined, matched, near, far)
+
+
+def _row_of(mask):
+    return [np.flatnonzero(row).tolist() for row in mask]
+
+
+def test_strips_follow_the_refined_background_beside_the_object(geometry):
+    # a fronto-parallel object at 30 px over a background quadratic at 10 px; in rows 0-3 the
+    # refined map puts the visible background 8 px nearer (a box the quadratic missed)
+    fg = np.zeros((H, W), bool)
+    fg[:, 36:] = True
+    surface = np.where(fg, 30.0, 10.0)
+    refined = surface.copy()
+    refined[:6][~fg[:6]] += 8.0
+    matched = np.ones((H, W), bool)
+    matched[4:6] = False                        # rows 4, 5: the refinement filled them in
+    got, want = _strips(geometry, fg, surface, refined, matched)
+    rows = _row_of(got)
+    assert rows[0] == list(range(24, 36))       # 30 - 18: twelve pixels, not twenty
+    assert rows[4] == rows[6] == list(range(16, 36))   # no match there, or no box: twenty
+    np.testing.assert_array_equal(got, want)
+
+
+def test_a_short_run_hides_no_more_than_its_own_footprint(geometry):
+    fg = np.zeros((H, W), bool)
+    fg[0, 40:45] = True                          # 5 px of foreground, 20 px in front
+    fg[1, 40:60] = True
+    surface = np.where(fg, 30.0, 10.0)
+    got, want = _strips(geometry, fg, surface, surface)
+    rows = _row_of(got)
+    # the right camera sees the short run over [20, 25) of the background: x - 10 in
+    # [40 - 30, 45 - 30)
+    assert rows[0] == list(range(20, 25))
+    assert rows[1] == list(range(20, 40))
+    np.testing.assert_array_equal(got, want)
+
+
+def test_strips_keep_the_quadratic_without_evidence_or_past_the_border(geometry):
+    fg = np.zeros((H, W), bool)
+    fg[0, 18:40] = True                          # the strip reaches past the left border
+    fg[1, 20:24] = fg[1, 34:50] = True           # the second run's strip ends on the first
+    fg[2, 0:30] = True                           # a run at the border hides nothing
+    surface = np.where(fg, 30.0, 10.0)
+    refined = np.where(fg, 30.0, 14.0)           # the refined background disagrees everywhere
+    got, want = _strips(geometry, fg, surface, refined)
+    rows = _row_of(got)
+    assert rows[0] == list(range(0, 18))         # clipped at the border, no window: 20 px
+    # row 1, the 4 px run: no window left of the border, its footprint hides [0, 4); the
+    # 16 px run: the background 4 px nearer over [0, 7] and then [0, 11], so 16 px, less
+    # the first run's pixels
+    assert rows[1] == [0, 1, 2, 3, 18, 19] + list(range(24, 34))
+    np.testing.assert_array_equal(got, want)
+    assert rows[2] == []
+
+
+def test_a_solve_measures_its_strips_against_the_refined_boxes(ti_arch):
+    """The stress set's boxes (small size): one quadratic puts the wall where a box stands
+    beside the object; the strips measured against the refined background score higher,
+    and without the refinement the output keeps the quadratics' strips."""
+    from lss_kernels import Params, Solver
+    from lss_kernels.metrics import score
+    from lss_kernels.scenes import make_scene
+    from lss_kernels.stress import stress_specs
+    keywords = dict(stress_specs(seed=0, size="small"))["clutter_boxes"]
+    scene = make_scene(None, **{k: v for k, v in keywords.items() if k != "meta"})
+    from lss_kernels.model.offset import to_user_left
+    solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse)
+    try:
+        solver.run()
+        surface, quadratics, foreground = solver.left_view()
+        _, strips, foreground_again, refined = solver.left_view(refine=True)
+        matched = to_user_left(solver.extent.image(solver.refinement.weight), solver.shift)
+    finally:
+        solver.close()
+    np.testing.assert_array_equal(foreground, foreground_again)
+    np.testing.assert_array_equal(strips, after.occluded_strips(
+        foreground, surface, refined, matched > 0, *Params().strip_window))
+    f1 = lambda occlusion: score(refined, occlusion, scene)["occ_f1"]
+    assert f1(strips) >= f1(quadratics) + 0.03, (f1(strips), f1(quadratics))
+    plain = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse,
+                   params=Params(refine=False, max_iterations=1))
+    try:
+        plain.run()
+        np.testing.assert_array_equal(plain.result().occlusion, plain.left_view()[1])
+    finally:
+        plain.close()

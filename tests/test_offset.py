@@ -129,7 +129,7 @@ def test_a_cyclopean_start_is_read_in_the_user_frame(ti_arch, which):
     try:
         assert solver.search["from_zero"] == (which != "easy")
         from_left = solver.initial_mask.copy()
-        left_view = solver.initial_foreground_left().copy()
+        left_view = solver.initial_left.copy()
         solver.reset(scene.left, scene.right, scene.d_max, (cx - half, cy, rx, ry),
                      init_frame="cyclopean")
         from_cyclopean = solver.initial_mask.copy()

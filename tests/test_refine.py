@@ -7,7 +7,7 @@ import taichi as ti
 from lss_kernels import Params
 from lss_kernels.kernels.backend import FieldPool
 from lss_kernels.model.refine import LayerRefinement
-from lss_kernels.reference import kernels as ref
+from lss_kernels.reference import refine as after
 
 
 def _texture(rng, H, W, cell=2.0):
@@ -91,7 +91,7 @@ def test_kernels_match_the_numpy_specification(ti_arch):
     surface = np.where(fg, 29.0, 9.5)                          # off by a pixel or so
     passes = ((5, 3, 2), (2, 2, 1))
     got = run_kernels(left, right, surface, fg, occ, 40.0, passes)
-    want = ref.refine_layers(left, right, surface, fg, occ, 40.0, passes, 0.9)
+    want = after.refine_layers(left, right, surface, fg, occ, 40.0, passes, 0.9)
     # f32 prefix sums against f64 box sums: a few thousandths of a pixel; a near-tie of two
     # candidates may rank differently at a rare pixel
     close = np.abs(got - want) < 0.01
@@ -115,7 +115,7 @@ def test_a_surface_outside_the_searched_range_is_clamped_first(ti_arch):
     x = np.arange(fg.shape[1])[None]
     seen = ~occ & ~fg & (x >= 40)
     assert np.abs(got - 6.0)[seen].mean() < 0.5
-    want = ref.refine_layers(left, right, surface, fg, occ, 40.0, passes, 0.9)
+    want = after.refine_layers(left, right, surface, fg, occ, 40.0, passes, 0.9)
     assert np.abs(got - want).mean() < 1e-3
 
 

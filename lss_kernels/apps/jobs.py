@@ -101,7 +101,7 @@ class SolverCache:
 
         def run(p):
             result, solver = self._run(job, p, callback)
-            return result, (solver.left_image, solver.initial_foreground_left(),
+            return result, (solver.left_image, solver.initial_left,
                             solver.init_info)
         return with_recovery(run, params, job.d_max, job.left, job.right)
 

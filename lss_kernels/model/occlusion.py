@@ -25,13 +25,32 @@ at x_l in the left view, and the left pixel nearest x_l is asked whether it is f
 the occluded strip is as wide as the rendered jump in whole pixels, and a whole-pixel jump
 does not lose or gain a pixel to float rounding (a 3 px jump on a rendered probe: occlusion
 F1 0.66 -> 0.92).
+
+The strips measured against the refined background (:meth:`OcclusionGeometry.measure_strips`,
+after :mod:`lss_kernels.model.refine`): a strip is as wide as the jump from the foreground at
+its edge to the background where the right camera sees it again, at the strip's far end.  The
+quadratic Theta_2 is one surface for the whole background, and near the object a box, a shelf
+or a floor can lie pixels away from it; the refined disparity of the visible background just
+beyond the strip says where.  Each run of foreground pixels of a row that starts at ``a``
+takes ``t = S(a) - (S(x0) + r)``, with ``S`` the model's left-view disparity, ``x0 =
+floor(a - t - 1/2)`` the first background pixel seen again, and ``r`` the median of the
+refined minus the model's disparity over the background pixels from ``far`` to ``near``
+pixels left of ``x0`` that hold a distinct match of their own (near enough to follow a local
+surface, far enough from the strip's end, where the refinement's windows mix the layers; a
+background without matches, dark or weakly textured, keeps its quadratic: the refinement
+only fills it from afar); a fixed point from the model's jump, as the ray cast.  The run's
+footprint in the right view bounds the strip on the right (a short run hides no more than
+its own length), as the z-buffer does.
 """
 import taichi as ti
 
 from ..kernels import lanes
 from . import FIXED_POINT_STEPS
 
-__all__ = ["OcclusionGeometry"]
+__all__ = ["OcclusionGeometry", "STRIP_EVIDENCE"]
+
+#: The fewest matched background pixels in a strip's window that re-measure its jump.
+STRIP_EVIDENCE = 3
 
 
 
@@ -163,3 +182,83 @@ class OcclusionGeometry:
                 self.disparity_left[y, x] = ti.max(d, 0.0)
                 self.foreground_left[y, x] = fg
                 self.occlusion_left[y, x] = occ
+
+    @ti.kernel
+    def measure_strips(self, refined: ti.template(), matched: ti.template(), near: ti.i32,
+                       far: ti.i32):
+        """Re-measure every occluded strip of :meth:`render_left`'s output against the
+        ``refined`` left-view disparity (a plane; module text) where ``matched`` (a plane,
+        > 0 on the pixels with a distinct match of their own) says it was measured:
+        ``occlusion_left`` is rewritten, ``disparity_left`` (the model's) and
+        ``foreground_left`` are read.  A thread per row walks its runs of foreground pixels;
+        the median over the window is the order statistic found by counting (no local
+        arrays)."""
+        height, width = self.extent.height(), self.extent.width()
+        for y in range(height):
+            for x in range(width):
+                self.occlusion_left[y, x] = 0
+            a = 1
+            while a < width:
+                if self.foreground_left[y, a] == 1 and self.foreground_left[y, a - 1] == 0:
+                    b = a
+                    while b < width and self.foreground_left[y, b] == 1:
+                        b += 1
+                    d_edge = self.disparity_left[y, a]
+                    t = d_edge - self.disparity_left[y, a - 1]
+                    for _ in range(FIXED_POINT_STEPS):
+                        x0 = ti.cast(ti.floor(a - t - 0.5), ti.i32)
+                        if t <= 0 or x0 < 0:
+                            break
+                        if self.foreground_left[y, x0] == 1:
+                            break
+                        r, count = self._median_residual(refined, matched, y,
+                                                         ti.max(x0 - far, 0), x0 - near)
+                        if count < STRIP_EVIDENCE:
+                            break
+                        t_new = d_edge - self.disparity_left[y, x0] - r
+                        done = ti.abs(t_new - t) < 1e-3
+                        t = t_new
+                        if done:
+                            break
+                    if t > 0:
+                        first = ti.max(ti.cast(ti.ceil(a - t - 0.5), ti.i32), 0)
+                        t_end = t + self.disparity_left[y, b - 1] - d_edge
+                        last = ti.min(a - 1, ti.cast(ti.floor(b - 0.5 - t_end), ti.i32))
+                        for x in range(first, last + 1):
+                            if self.foreground_left[y, x] == 0:
+                                self.occlusion_left[y, x] = 1
+                    a = b
+                else:
+                    a += 1
+
+    @ti.func
+    def _evidence(self, matched: ti.template(), y, x):
+        """Whether the background pixel ``(y, x)`` holds a match of its own."""
+        return (self.foreground_left[y, x] == 0) & (matched[y, x] > 0)
+
+    @ti.func
+    def _median_residual(self, refined: ti.template(), matched: ti.template(), y, lo, hi):
+        """The median of ``refined - disparity_left`` over the matched background pixels of
+        row ``y`` in ``[lo, hi]`` (the mean of the two middle values for an even count), and
+        their count."""
+        count = 0
+        for x in range(lo, hi + 1):
+            if self._evidence(matched, y, x):
+                count += 1
+        low_rank, high_rank = (count - 1) // 2, count // 2
+        low, high = 0.0, 0.0
+        for i in range(lo, hi + 1):
+            if self._evidence(matched, y, i):
+                v = refined[y, i] - self.disparity_left[y, i]
+                below, not_above = 0, 0
+                for j in range(lo, hi + 1):
+                    if self._evidence(matched, y, j):
+                        w = refined[y, j] - self.disparity_left[y, j]
+                        below += ti.cast(w < v, ti.i32)
+                        not_above += ti.cast(w <= v, ti.i32)
+                # v is every order statistic of rank below .. not_above - 1
+                if below <= low_rank < not_above:
+                    low = v
+                if below <= high_rank < not_above:
+                    high = v
+        return 0.5 * (low + high), count

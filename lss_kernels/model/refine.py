@@ -52,9 +52,11 @@ class LayerRefinement:
     ratio : float
         Peak-ratio threshold of a distinct match (in (0, 1]).
 
-    The planes have the shape of the image's size bucket and the kernels read ``H`` and
-    ``W`` at run time from the pool's :class:`~lss_kernels.kernels.backend.Extent`: they
-    compile once per bucket.
+    After :meth:`run`, ``surface`` holds the refined map and ``weight`` 1 on the pixels
+    whose last pass kept a distinct match of their own (the others took their layer's
+    average from their neighbours).  The planes have the shape of the image's size bucket
+    and the kernels read ``H`` and ``W`` at run time from the pool's
+    :class:`~lss_kernels.kernels.backend.Extent`: they compile once per bucket.
     """
 
     def __init__(self, pool, height, width, passes, ratio):

@@ -21,7 +21,7 @@ __all__ = [
     "median_filter", "convolve", "gaussian_derivatives", "curvature", "interp_row",
     "interp_volume", "shape_value", "basis", "fit_shape", "delta_theta", "boundary_weight",
     "levelset_step", "squared_distance", "reinitialise", "disparity", "near_pixels", "dilate",
-    "grow_region", "left_cost", "refine_layers",
+    "grow_region",
 ]
 
 
@@ -424,69 +424,3 @@ def grow_region(d, seed, seed_d, tolerance, step):
                 region[v, u] = True
                 todo.append((v, u))
     return region
-
-
-def left_cost(left, right, d, censuses):
-    """The AD-Census cost (as :func:`matching_cost`) of every left pixel (y, x) against the
-    right pixel (y, x - d); NaN where x - d leaves the image.  ``censuses``: the
-    :func:`census` of both images."""
-    H, W, _ = left.shape
-    cost = np.full((H, W), np.nan)
-    if d >= W:
-        return cost
-    ad = np.abs(left[:, d:] - right[:, :W - d]).mean(axis=2)
-    cl, cr = censuses
-    hamming = (cl[:, d:] != cr[:, :W - d]).sum(axis=2) / 48.0
-    cost[:, d:] = (1 - np.exp(-ad / (10 / 255))) + (1 - np.exp(-hamming / (30 / 63)))
-    return cost
-
-
-def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ratio,
-                  wide_weight=0.05):
-    """Surface plus parallax (:mod:`lss_kernels.model.refine`): per pass ``(R, window,
-    smoothing)``, the layer-restricted window mean of the AD-Census cost for the candidates
-    ``round(S) - R .. round(S) + R``, the distinct interior best (peak ratio) refined by a
-    parabola, the layer-restricted average of its residual, added to S and clamped.  S
-    starts clamped to ``[0, d_max]`` (non-finite: 0)."""
-    H, W = surface.shape
-    S = np.asarray(surface, np.float64)
-    S = np.clip(np.where(np.isfinite(S), S, 0.0), 0.0, d_max)
-    layers = [np.asarray(foreground, bool), ~np.asarray(foreground, bool)]
-    visible = ~np.asarray(occlusion, bool)
-    censuses = census(left), census(right)
-    costs_by_d = {d: left_cost(left, right, d, censuses) for d in range(int(d_max) + 1)}
-    for R, window, smoothing in passes:
-        base = np.round(S).astype(int)
-        costs = np.full((2 * R + 1, H, W), np.inf)
-        for d in range(int(d_max) + 1):
-            c = costs_by_d[d]
-            inside = np.isfinite(c)
-            for lab in layers:
-                num = box_sum(np.where(inside & lab, c, 0.0), 2 * window + 1)
-                den = box_sum((inside & lab).astype(float), 2 * window + 1)
-                k = d - base + R
-                ok = lab & inside & (k >= 0) & (k <= 2 * R) & (den > 0)
-                costs[np.where(ok, k, 0), np.arange(H)[:, None], np.arange(W)] = np.where(
-                    ok, num / np.maximum(den, 1e-30),
-                    costs[np.where(ok, k, 0), np.arange(H)[:, None], np.arange(W)])
-        kb = costs.argmin(axis=0)
-        best = costs.min(axis=0)
-        ks = np.arange(2 * R + 1)[:, None, None]
-        second = np.where(np.abs(ks - kb) >= 2, costs, np.inf).min(axis=0)
-        cm = np.take_along_axis(costs, np.clip(kb - 1, 0, 2 * R)[None], 0)[0]
-        cp = np.take_along_axis(costs, np.clip(kb + 1, 0, 2 * R)[None], 0)[0]
-        ok = ((kb > 0) & (kb < 2 * R) & visible & np.isfinite(best) & np.isfinite(cm)
-              & np.isfinite(cp) & (best < ratio * second))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            den = cm - 2 * best + cp
-            sub = np.where(ok & (den > 0), 0.5 * (cm - cp) / den, 0.0)
-        residual = np.where(ok, base + kb - R + sub - S, 0.0)
-        weight = ok.astype(float)
-        for lab in layers:
-            num = (box_sum(weight * residual * lab, 2 * smoothing + 1)
-                   + wide_weight * box_sum(weight * residual * lab, 8 * smoothing + 1))
-            den = (box_sum(weight * lab, 2 * smoothing + 1)
-                   + wide_weight * box_sum(weight * lab, 8 * smoothing + 1))
-            S = np.where(lab & (den > 0), S + num / np.where(den > 0, den, 1.0), S)
-        S = np.clip(S, 0.0, d_max)
-    return S
