@@ -9,8 +9,9 @@ run with the paper's protocol (:func:`lss_kernels.metrics.score`) and writes, un
     results.csv                           one row per scene and method, then a mean per method
     table.md                              occlusion F1 per scene and method beside the paper's
     panels/<scene>.png                    left image, true and estimated disparities
-    convergence.csv / .md / .png          with ``trace``: lss scored at every stop window,
-                                          and variants of the stopping rule replayed
+    convergence.csv / .md / .png          with ``trace``: lss's two quadratics (unrefined)
+                                          scored at every stop window, and variants of the
+                                          stopping rule replayed
 
 A run whose ``result.json`` exists is not repeated (the evaluation can be interrupted and
 resumed) unless ``force`` is set.  ``results.csv``, ``table.md`` and the panels describe the
@@ -409,7 +410,8 @@ def add_cli(subparsers) -> None:
                    help=f"Taichi backend for lss: {', '.join(ARCHES)} (default {DEFAULT_ARCH}: "
                         f"CUDA if a device answers, else the CPU)")
     p.add_argument("--trace", action="store_true",
-                   help="score lss at the end of every stop window; writes convergence.csv, "
+                   help="score lss's two quadratics (unrefined) at the end of every stop "
+                        "window; writes convergence.csv, "
                         ".md (with variants of the stopping rule replayed) and .png")
     p.add_argument("--init", choices=("auto", "gt-point", "gt-box"),
                    help="start lss from auto, or from a point at the centroid / the bounding "
