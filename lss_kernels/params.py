@@ -126,8 +126,10 @@ class Params:
         refined minus the quadratic disparity over the background pixels ``near`` to ``far``
         left-view pixels beyond the strip
         (:meth:`~lss_kernels.model.occlusion.OcclusionGeometry.measure_strips`): one
-        quadratic cannot follow a box, a shelf or a floor beside the object.  ``(0, 0)``:
-        the strips of the two quadratics, the paper's; so it is without ``refine``.
+        quadratic cannot follow a box, a shelf or a floor beside the object; ``far - near
+        >= 2``, a window that can hold the three matched pixels a re-measure needs.
+        ``(0, 0)``: the strips of the two quadratics, the paper's; so it is without
+        ``refine``.
     message_ambiguity : float
         0: a patch's message weighs 1 / sigma_p^2 (Eq. 5).  > 0: also times its cost
         curve's distinctness ``clip((1 - r) / message_ambiguity, 0, 1)``, ``r`` the peak

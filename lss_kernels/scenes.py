@@ -239,6 +239,15 @@ def _check(spec: SceneSpec, surfaces: list, ellipse, pad: int) -> None:
             what = "background" if name == "d_bg" else f"prop ({name[:-3]})"
             raise ValueError(f"d_fg, {name}: the foreground must be in front of the {what} "
                              f"(larger disparity) everywhere inside the outline")
+    # nor may a prop beside the object hide it from the right camera (a third layer)
+    xr = np.where(inside, x - d_fg, np.nan)
+    seen, _, _ = _nearest(surfaces, y, lambda surface: _source_x(surface.theta, xr, y))
+    hidden = inside & (seen > 0) & (seen < len(surfaces) - 1)
+    if hidden.any():
+        i = int(seen[hidden][0]) - 1
+        raise ValueError(f"props[{i}]: nearer than the object on its right-view rays, it hides "
+                         f"{int(hidden.sum())} of its pixels from the right camera; put it "
+                         f"behind the object or away from its rows")
 
 
 @dataclass(frozen=True)

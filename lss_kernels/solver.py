@@ -370,7 +370,7 @@ class Solver:
         refined disparity (:mod:`lss_kernels.model.refine`; without ``params.refine``, the
         disparity) comes fourth and the strips are measured against it (``strip_window``)."""
         self.occ.render_left(self.shapes, self.levelset.phi)
-        planes = [self.occ.disparity_left, self.occ.disparity_left]
+        refined = self.occ.disparity_left
         if refine and self.refinement is not None:
             t0 = time.perf_counter()
             self.refinement.run(self.left, self.right, self.occ.disparity_left,
@@ -381,13 +381,13 @@ class Solver:
                                         *self.params.strip_window)
             ti.sync()
             self.timings["refine"] = time.perf_counter() - t0
-            planes[1] = self.refinement.surface
+            refined = self.refinement.surface
         user = lambda plane: to_user_left(self.extent.image(plane), self.shift)  # user frame
         clean = lambda d: np.clip(np.nan_to_num(d, nan=0.0, posinf=0.0, neginf=0.0)
                                   - self.offset, 0.0, self.d_max).astype(np.float32)
-        out = (clean(user(planes[0])), user(self.occ.occlusion_left).astype(bool),
+        out = (clean(user(self.occ.disparity_left)), user(self.occ.occlusion_left).astype(bool),
                user(self.occ.foreground_left).astype(bool))
-        return out + (clean(user(planes[1])),) if refine else out
+        return out + (clean(user(refined)),) if refine else out
 
     def consensus(self):
         """Consensus mean and sigma, cyclopean frame, left-view disparity units."""

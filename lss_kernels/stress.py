@@ -207,8 +207,8 @@ def _floor(d_wall: float, y_meet: float, slope: float, cy: float) -> dict:
 def _clutter(rng) -> list:
     """As :func:`_periodic`; ``props`` in medium pixels (:func:`_placed` scales them)."""
     return [
-        ("floor_wall", "a floor rising from 10 to 22 px meets a wall at 10 px below the "
-                       "object, which floats at 34 px",
+        ("floor_wall", "a floor rising from 10 to 22 px meets a wall at 10 px across the "
+                       "object's lower half; the object floats at 34 px",
          {"d_fg": 34, "d_bg": 10, "props": [_floor(10.0, 140.0, 0.12, 120.0)]}),
         ("standing", "a box standing on a floor that meets the wall at 10 px: 2 px in front "
                      "of the floor where it stands, 18 px in front of the wall at its top",

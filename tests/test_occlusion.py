@@ -203,6 +203,30 @@ def test_strips_keep_the_quadratic_without_evidence_or_past_the_border(geometry)
     assert rows[2] == []
 
 
+def test_a_slanted_background_without_matches_keeps_its_quadratics_strip(geometry):
+    # the background falls towards the object (10 px at its edge, 5.2 px 24 px away): the
+    # strip ends where the jump to the quadratic there is its width, 30 - 4.8 = 25.2 px,
+    # whether the refined map agrees with the quadratic or no pixel holds a match
+    fg = np.zeros((H, W), bool)
+    fg[:, 36:] = True
+    surface = np.where(fg, 30.0, 10.0 + 0.2 * (X - 36))
+    matched_none = np.zeros((H, W), bool)
+    got, want = _strips(geometry, fg, surface, surface + 3.0 * ~fg, matched_none)
+    agreed, _ = _strips(geometry, fg, surface, surface)
+    assert _row_of(got)[0] == list(range(11, 36))          # 25 px, not the edge's 20
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(got, agreed)
+
+
+def test_a_narrow_run_tilted_towards_the_camera_by_the_border_hides_nothing(geometry):
+    fg = np.zeros((H, W), bool)
+    fg[0, 2:4] = True
+    surface = np.where(fg, 0.0, 10.0)
+    surface[0, 2:4] = (12.0, 20.0)               # its right end lies 16 px left of the image
+    got, want = _strips(geometry, fg, surface, surface)
+    assert not got.any() and not want.any()
+
+
 def test_a_solve_measures_its_strips_against_the_refined_box(ti_arch):
     """A box at 16 px stands between the object (24 px) and the wall (8 px), beside the
     object's left edge: one quadratic puts the wall there, and its strips are 16 px wide

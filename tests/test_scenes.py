@@ -265,6 +265,8 @@ def test_a_floor_meets_the_wall_where_it_comes_nearer():
     (({"d": 10.0, "box": (1.0, 2.0, 0.0, 3.0)},), r"props\[0\]: box: expected \(cx, cy, rx, ry\)"),
     (({"d": 10.0, "outline": "star"},), r"props\[0\]: outline: unknown 'star'"),
     (({"d": -3.0, "box": (20.0, 20.0, 5.0, 5.0)},), r"props\[0\]: d: disparity must be >= 0"),
+    (({"d": 12.0, "box": (20.0, 20.0, 5.0, 5.0)}, {"d": 40.0, "box": (105.0, 48.0, 5.0, 10.0)}),
+     r"props\[1\]: nearer than the object on its right-view rays, it hides \d+ of its pixels"),
 ])
 def test_prop_errors_name_the_prop(props, message):
     with pytest.raises(ValueError, match=message):

@@ -159,8 +159,7 @@ def test_clutter_backgrounds_are_not_one_quadratic(scenes):
             while run < edge and scene.occ_left[row, edge - 1 - run]:
                 run += 1
             widths.append(run)
-        if scene.name != "clutter_floor_wall":      # its floor stays below the object
-            assert max(widths) - min(widths) >= 3, (scene.name, widths)
+        assert max(widths) - min(widths) >= 3, (scene.name, widths)
 
 
 def test_init_family_starts(scenes):
@@ -212,24 +211,34 @@ def test_command_line(tmp_path, capsys):
     assert len(err.strip().splitlines()) == 1 and "not a folder" in err
 
 
-#: One scene per family, small size, seed 0, and its occlusion-F1 floor (about 0.05 under
-#: what the default solve measured; the recovery solve rescues curved_ball_dark and
-#: weak_bg_dark; the small periodic scenes are at the edge of what the solver does).
+#: One scene per family, seed 0, and its occlusion-F1 floor (about 0.05 under what the default
+#: solve measured; the recovery solve rescues curved_ball_dark and weak_bg_dark).  The small
+#: size halves the jumps but keeps texture scales, so its periodic and fine scenes lie below
+#: the scale their families test (stripes of 3-8 px over jumps of 9-10 px, jumps of 1.5-3.5 px:
+#: F1 0-0.9 by the rounding of a single pixel, or, for periodic_both_p7, by whether the
+#: stopping rule's 0.002 is met at iteration 740 by 0.0020 of the area: 0.29 on one machine,
+#: above 0.45 on another, with the same code); those two families are solved at the medium
+#: size.
 FAMILY_FLOORS = {"camouflage_noise_noisy": 0.85, "curved_ball_dark": 0.8,
                  "init_spill30": 0.9, "jump_60_far": 0.95, "shape_L": 0.85,
-                 "weak_bg_dark": 0.9, "periodic_both_p7": 0.45, "fine_jump5_far": 0.84,
-                 "clutter_boxes": 0.85}
+                 "weak_bg_dark": 0.9, "clutter_boxes": 0.85}
+MEDIUM_FLOORS = {"periodic_bg_p6": 0.83, "fine_jump5_far": 0.88}
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", sorted(FAMILY_FLOORS))
+@pytest.mark.parametrize("name", sorted(FAMILY_FLOORS) + sorted(MEDIUM_FLOORS))
 def test_each_family_solves_above_its_floor(scenes, ti_arch, name):
     from lss_kernels import solve
-    assert {n.split("_")[0] for n in FAMILY_FLOORS} == set(stress.STRESS_FAMILIES)
-    scene = scenes[name]
+    assert {n.split("_")[0] for n in {**FAMILY_FLOORS, **MEDIUM_FLOORS}} == \
+        set(stress.STRESS_FAMILIES)
+    if name in MEDIUM_FLOORS:
+        keywords = dict(stress.stress_specs(seed=0, size="medium"))[name]
+        scene = make_scene(None, **{k: v for k, v in keywords.items() if k != "meta"})
+    else:
+        scene = scenes[name]
     result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse)
     f1 = score(result.disparity, result.occlusion, scene)["occ_f1"]
-    assert f1 >= FAMILY_FLOORS[name], (name, f1, result.recovery)
+    assert f1 >= {**FAMILY_FLOORS, **MEDIUM_FLOORS}[name], (name, f1, result.recovery)
 
 
 @pytest.mark.slow

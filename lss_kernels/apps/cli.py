@@ -222,16 +222,14 @@ def build_parser(command=None):
 
 
 def _command(argv):
-    """The command named by ``argv`` when it is a known one, else None (the full parser
-    then lists every command in its help or its error)."""
-    words = [a for a in argv if not a.startswith("-")]
-    known = ("solve", *SUBCOMMAND_MODULES)
-    return words[0] if words and words[0] in known and argv[0] == words[0] else None
+    """The command that ``argv`` starts with when it is a known one, else None (the full
+    parser then lists every command in its help or its error)."""
+    return argv[0] if argv and argv[0] in ("solve", *SUBCOMMAND_MODULES) else None
 
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(_command(argv) if argv else None)
+    parser = build_parser(_command(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

@@ -36,9 +36,10 @@ takes ``t = S(a) - (S(x0) + r)``, with ``S`` the model's left-view disparity, ``
 floor(a - t - 1/2)`` the first background pixel seen again, and ``r`` the median of the
 refined minus the model's disparity over the background pixels from ``far`` to ``near``
 pixels left of ``x0`` that hold a distinct match of their own (near enough to follow a local
-surface, far enough from the strip's end, where the refinement's windows mix the layers; a
-background without matches, dark or weakly textured, keeps its quadratic: the refinement
-only fills it from afar); a fixed point from the model's jump, as the ray cast.  The run's
+surface, far enough from the strip's end, where the refinement's windows mix the layers;
+``r = 0`` with fewer than ``STRIP_EVIDENCE`` of them: a background without matches, dark or
+weakly textured, keeps its quadratic, which the refinement only fills from afar); a fixed
+point from the model's jump, as the ray cast.  The run's
 footprint in the right view bounds the strip on the right (a short run hides no more than
 its own length), as the z-buffer does.
 """
@@ -214,7 +215,7 @@ class OcclusionGeometry:
                         r, count = self._median_residual(refined, matched, y,
                                                          ti.max(x0 - far, 0), x0 - near)
                         if count < STRIP_EVIDENCE:
-                            break
+                            r = 0.0     # no evidence: the quadratic's own jump
                         t_new = d_edge - self.disparity_left[y, x0] - r
                         done = ti.abs(t_new - t) < 1e-3
                         t = t_new

@@ -7,6 +7,7 @@ arrays and left-view disparities, as those kernels take them.
 import numpy as np
 
 from ..model import FIXED_POINT_STEPS
+from ..model.occlusion import STRIP_EVIDENCE
 from .kernels import box_sum, census
 
 __all__ = ["left_cost", "refine_layers", "occluded_strips"]
@@ -79,7 +80,7 @@ def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ra
 
 
 def occluded_strips(foreground, surface, refined, matched, near, far, steps=FIXED_POINT_STEPS,
-                    least=3):
+                    least=STRIP_EVIDENCE):
     """The left-view occlusion with each strip measured against the refined background
     (``OcclusionGeometry.measure_strips``).  ``foreground`` bool, ``surface`` the model's
     left-view disparity (each layer's quadratic), ``refined`` the refined disparity,
@@ -91,10 +92,10 @@ def occluded_strips(foreground, surface, refined, matched, near, far, steps=FIXE
     t_b``, ``t_b = t + S(b - 1) - S(a)``, where ``t`` is the jump from the foreground at
     its edge to the background where it is seen again, at ``x0 = floor(a - t - 1/2)``:
     the fixed point of ``t = S(a) - (S(x0) + r)``, ``r`` the median of ``refined - S`` over
-    the matched background pixels of ``[x0 - far, x0 - near]``, started at the jump ``S(a)
-    - S(a - 1)``; at most ``steps`` steps, ending early (with the last ``t``) once a step
-    changes ``t`` by less than 1e-3, or before it when ``x0`` leaves the image or falls on
-    the foreground or the window holds fewer than ``least`` matched background pixels."""
+    the matched background pixels of ``[x0 - far, x0 - near]`` (0 when it holds fewer than
+    ``least``: the quadratic's own jump), started at the jump ``S(a) - S(a - 1)``; at most
+    ``steps`` steps, ending early (with the last ``t``) once a step changes ``t`` by less
+    than 1e-3, or before it when ``x0`` leaves the image or falls on the foreground."""
     fg = np.asarray(foreground, bool)
     evidence = ~fg & np.asarray(matched, bool)
     S, R = np.asarray(surface, np.float64), np.asarray(refined, np.float64)
@@ -111,9 +112,8 @@ def occluded_strips(foreground, surface, refined, matched, near, far, steps=FIXE
                     break
                 lo, hi = max(x0 - far, 0), x0 - near + 1
                 window = evidence[y, lo:max(hi, lo)]
-                if window.sum() < least:
-                    break
-                t_new = S[y, a] - S[y, x0] - np.median((R - S)[y, lo:hi][window])
+                r = np.median((R - S)[y, lo:hi][window]) if window.sum() >= least else 0.0
+                t_new = S[y, a] - S[y, x0] - r
                 done = abs(t_new - t) < 1e-3
                 t = t_new
                 if done:
@@ -121,5 +121,6 @@ def occluded_strips(foreground, surface, refined, matched, near, far, steps=FIXE
             if t > 0:
                 first = max(int(np.ceil(a - t - 0.5)), 0)
                 last = min(a - 1, int(np.floor(b - 0.5 - (t + S[y, b - 1] - S[y, a]))))
-                occ[y, first:last + 1] |= ~fg[y, first:last + 1]
+                if last >= first:
+                    occ[y, first:last + 1] |= ~fg[y, first:last + 1]
     return occ
