@@ -16,10 +16,8 @@ for the rendered images: ``disp_left`` is ``d_S`` at the pixel centres, and a le
 occluded (``occ_left``) when its point is not seen by the right camera: it projects outside
 the right image (``xr < -0.5``) or a nearer surface covers its right-view ray.
 
-Textures (:data:`TEXTURES`, per layer; :mod:`lss_kernels.textures`): ``"random"`` value noise (the default),
-``"low_contrast"`` value noise of a few grey levels around a brightness, ``"stripes"`` (a sinusoid
-of a given period and orientation) and ``"palette"`` (blobs coloured from a given palette, for
-camouflage: give both layers the same palette).
+Textures, one per layer (:mod:`lss_kernels.textures`): value noise (the default), low-contrast
+noise, stripes, and palette blobs (camouflage, when both layers share the palette).
 
 ``SceneSpec.props`` adds surfaces behind the object (boxes, a floor meeting the wall, a shelf):
 each view shows the nearest surface on each ray, and the ground truth counts them as background.

@@ -110,8 +110,9 @@ def occluded_strips(foreground, surface, refined, matched, near, far, steps=FIXE
                 x0 = int(np.floor(a - t - 0.5))
                 if t <= 0 or x0 < 0 or fg[y, x0]:
                     break
-                lo, hi = max(x0 - far, 0), x0 - near + 1
-                window = evidence[y, lo:max(hi, lo)]
+                lo = max(x0 - far, 0)
+                hi = max(x0 - near + 1, lo)     # an empty window near the border
+                window = evidence[y, lo:hi]
                 r = np.median((R - S)[y, lo:hi][window]) if window.sum() >= least else 0.0
                 t_new = S[y, a] - S[y, x0] - r
                 done = abs(t_new - t) < 1e-3
