@@ -27,7 +27,7 @@ from .kernels.backend import FieldPool
 from .model import STAGES
 from .model.costs import BoundaryCosts
 from .model.hierarchy import PatchHierarchy
-from .model.init import InitialRegion
+from .model.init import CONTRAST, Box, InitialRegion
 from .model.levelset import LevelSet
 from .model.matching import MatchingCost
 from .model.messages import Messages
@@ -40,7 +40,7 @@ from .photometry import equalise
 from .result import Result
 from .model.shapes import GlobalShapes
 from .model.sweep import BackgroundSweep
-from .model.start import cyclopean_start
+from .model.start import cyclopean_start, foreground_shift, front_contrast
 from .stopping import StopRule
 
 __all__ = ["Result", "Solver", "solve"]
@@ -233,14 +233,57 @@ class Solver:
                                                      left=self.left_image)
             self.init_info = dict(info_to_user(self.initialiser.info, self.shift),
                                   seconds=time.perf_counter() - t0)
-        elif init_frame == "left":      # the user's left view -> the model's
-            init = (to_model_left(init, self.shift) if isinstance(init, np.ndarray)
-                    else (init[0] + self.shift,) + tuple(init[1:]))
+        else:
+            if init_frame == "left":    # the user's left view -> the model's
+                init = (to_model_left(init, self.shift) if isinstance(init, np.ndarray)
+                        else (init[0] + self.shift,) + tuple(init[1:]))
+            if isinstance(init, tuple) and self.params.refine_ellipse:
+                init, init_frame = self._region_in_ellipse(init, init_frame)
         mask, left = cyclopean_start(init, init_frame,
                                      self.extent.image(self.hierarchy.consensus_mean),
                                      self.extent.image(self.hierarchy.precision))
         self.initial_left = to_user_left(left, self.shift)
         return mask
+
+    def _region_in_ellipse(self, ellipse, frame):
+        """``Params.refine_ellipse``: the object under the ellipse's centre, cut to the box
+        around the ellipse (the start of a :class:`~lss_kernels.model.init.Box`), as
+        ``(mask, "cyclopean")``; ``(ellipse, frame)`` unchanged when no such region is found
+        (:meth:`InitialRegion.find` gives the box's inscribed ellipse back) or when that
+        region is not ``CONTRAST`` in front of the ring around it
+        (:func:`~lss_kernels.model.start.front_contrast`; in the notch of an L the centre
+        lies on the background).  ``ellipse`` is
+        in the model's left view or in the cyclopean frame (``frame``)."""
+        mean = self.extent.image(self.hierarchy.consensus_mean)
+        precision = self.extent.image(self.hierarchy.precision)
+        H, W = mean.shape
+        cx, cy, rx, ry = (float(v) for v in ellipse)
+        if frame == "cyclopean":        # x_left = x_c + c (lss_kernels.model.start)
+            y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+            cx += foreground_shift(((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0,
+                                   mean, precision)
+        box = Box(max(cx - rx, 0.0), max(cy - ry, 0.0), min(cx + rx, W - 1.0),
+                  min(cy + ry, H - 1.0))
+        if box.x1 - box.x0 < 1.0 or box.y1 - box.y0 < 1.0:
+            self.init_info["region"] = "none: the ellipse's box lies outside the image"
+            return ellipse, frame
+        t0 = time.perf_counter()
+        found, found_frame = self.initialiser.find(box, self.hierarchy.consensus_mean,
+                                                   self.hierarchy.precision,
+                                                   left=self.left_image)
+        info = info_to_user(self.initialiser.info, self.shift)
+        self.init_info["seconds"] = time.perf_counter() - t0
+        if found_frame == "cyclopean":
+            info["front_contrast"] = contrast = 2.0 * front_contrast(found, mean, precision)
+            if not contrast > 2.0 * CONTRAST:    # e.g. in an L's notch: the background
+                found_frame = None
+                info["why"] = (f"the region under the centre is not in front of what "
+                               f"surrounds it ({contrast:.1f} px)")
+        if found_frame == "cyclopean":
+            self.init_info["region"] = info
+            return found, found_frame
+        self.init_info["region"] = f"none ({info['why']}): the ellipse itself"
+        return ellipse, frame
 
     def _first_consensus(self):
         """The consensus with no prior and no validity (Eqs. 4-6 brought down to pixels)."""
@@ -349,7 +392,8 @@ class Solver:
             self.stop_reason = (f"converged at iteration {self.iteration}: the foreground "
                                 f"changed by {moving:.4f} of its area over the last "
                                 f"{p.stop_window} iterations (< {p.stop_fraction} in "
-                                f"{self._rule.quiet} windows in a row)")
+                                + ("its last window)" if self._rule.quiet == 1 else
+                                   f"{self._rule.quiet} windows in a row)"))
         elif self.iteration >= p.max_iterations:
             self.stop_reason = f"reached the iteration cap ({p.max_iterations})"
         self.done = self.stop_reason is not None

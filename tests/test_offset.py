@@ -116,30 +116,43 @@ def _zero_background():
                       ellipse=(82.0, 60.0, 36.0, 30.0), noise=0.01)
 
 
+@pytest.mark.parametrize("refine", [False, True])
 @pytest.mark.parametrize("which", ["easy", "zero background"])
-def test_a_cyclopean_start_is_read_in_the_user_frame(ti_arch, which):
+def test_a_cyclopean_start_is_read_in_the_user_frame(ti_arch, which, refine):
     # the same ellipse given in the left view and, moved by half the foreground's
     # disparity, in the cyclopean frame starts the same region, whether the grid starts at
-    # 2 px (easy: the background at 8 px) or at 0 px (the left view moved)
+    # 2 px (easy: the background at 8 px) or at 0 px (the left view moved); read as the
+    # ellipse itself, or as the box around it (Params.refine_ellipse)
     from lss_kernels import Solver
     scene = make_scene("easy") if which == "easy" else _zero_background()
     half = 12.0 if which == "easy" else 5.0
     cx, cy, rx, ry = scene.init_ellipse
-    solver = Solver(scene.left, scene.right, scene.d_max, (cx, cy, rx, ry), params=ZERO)
+    solver = Solver(scene.left, scene.right, scene.d_max, (cx, cy, rx, ry),
+                    params=ZERO.replace(refine_ellipse=refine))
     try:
         assert solver.search["from_zero"] == (which != "easy")
         from_left = solver.initial_mask.copy()
         left_view = solver.initial_left.copy()
+        info = solver.init_info
         solver.reset(scene.left, scene.right, scene.d_max, (cx - half, cy, rx, ry),
                      init_frame="cyclopean")
         from_cyclopean = solver.initial_mask.copy()
     finally:
         solver.close()
     assert (from_left != from_cyclopean).sum() <= 0.02 * from_left.sum()
-    # and the initial region reported in the left view is the ellipse given there
     y, x = np.mgrid[0:scene.left.shape[0], 0:scene.left.shape[1]]
     given = ((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0
-    assert (left_view != given).sum() <= 0.01 * given.sum()
+    if not refine:      # the initial region reported in the left view is the ellipse given
+        assert (left_view != given).sum() <= 0.01 * given.sum()
+        return
+    # the object under the centre, in the user's left view, cut to the ellipse's box
+    assert info["region"]["from"] == "the region under the box's centre, cut to the box"
+    x0, y0, x1, y1 = info["region"]["box"]
+    assert abs(x0 - (cx - rx)) < 1e-3 and abs(y1 - (cy + ry)) < 1e-3
+    fg, in_box = scene.fg_left, (x >= x0 - 1) & (x < x1 + 1) & (y >= y0) & (y < y1)
+    assert not (left_view & ~in_box).any()
+    assert (left_view & fg).sum() >= 0.95 * (fg & in_box).sum()   # this ellipse is small:
+    assert (left_view & fg).sum() >= 1.2 * (given & fg).sum()     # its box holds more
 
 
 def test_the_cli_says_where_the_search_started(tmp_path):

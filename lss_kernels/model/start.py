@@ -9,7 +9,10 @@ import numpy as np
 
 from .init import shift_columns
 
-__all__ = ["cyclopean_start", "foreground_shift"]
+__all__ = ["cyclopean_start", "foreground_shift", "front_contrast"]
+
+#: Width of the ring around a region that :func:`front_contrast` compares it with, pixels.
+RING = 8
 
 
 def foreground_shift(region: np.ndarray, mean: np.ndarray, precision: np.ndarray) -> float:
@@ -36,3 +39,32 @@ def cyclopean_start(init, init_frame: str, mean: np.ndarray, precision: np.ndarr
     if init_frame == "left":
         return region(-shift), region(0.0)
     return region(0.0), region(shift)
+
+
+def _dilated(mask: np.ndarray, r: int) -> np.ndarray:
+    """``mask`` dilated by a ``(2r+1)`` square (pixels beyond the border count as False)."""
+    out = mask.copy()
+    for axis in (0, 1):
+        grown = out.copy()
+        n = out.shape[axis]
+        for k in range(1, min(r, n - 1) + 1):
+            lo, hi = [slice(None)] * 2, [slice(None)] * 2
+            lo[axis], hi[axis] = slice(0, n - k), slice(k, n)
+            grown[tuple(lo)] |= out[tuple(hi)]
+            grown[tuple(hi)] |= out[tuple(lo)]
+        out = grown
+    return out
+
+
+def front_contrast(region: np.ndarray, mean: np.ndarray, precision: np.ndarray,
+                   ring: int = RING) -> float:
+    """How far ``region`` stands in front of what surrounds it: the median consensus
+    ``mean`` (cyclopean units) of its pixels with a consensus (``precision > 0``) less that
+    of the ring ``ring`` pixels wide around it; ``-inf`` when either has none.  A foreground
+    lies in front of its background (Sec. 2), so a region found on the background (in the
+    notch of an L) has a contrast near 0 or below."""
+    around = _dilated(region, ring) & ~region
+    inside, outside = region & (precision > 0), around & (precision > 0)
+    if not inside.any() or not outside.any():
+        return -np.inf
+    return float(np.median(mean[inside]) - np.median(mean[outside]))
