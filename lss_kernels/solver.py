@@ -27,12 +27,11 @@ from .kernels.backend import FieldPool
 from .model import STAGES
 from .model.costs import BoundaryCosts
 from .model.hierarchy import PatchHierarchy
-from .model.init import CONTRAST, Box, InitialRegion
+from .model.init import InitialRegion
 from .model.levelset import LevelSet
 from .model.matching import MatchingCost
 from .model.messages import Messages
-from .model.offset import (SHIFT, info_to_user, model_pair, search_range, to_model_left,
-                           to_model_start, to_user_left)
+from .model.offset import SHIFT, model_pair, search_range, to_user_left
 from .model.occlusion import OcclusionGeometry
 from .model.refine import LayerRefinement
 from .params import Params, c_max
@@ -40,7 +39,7 @@ from .photometry import equalise
 from .result import Result
 from .model.shapes import GlobalShapes
 from .model.sweep import BackgroundSweep
-from .model.start import cyclopean_start, foreground_shift, front_contrast
+from .model.start import initial_region
 from .stopping import StopRule
 
 __all__ = ["Result", "Solver", "solve"]
@@ -62,9 +61,11 @@ class Solver:
         Largest disparity to search, in left-view pixels (cyclopean ``c_max = ceil(d_max /
         2)``; one more for a pair searched from 0 px, :mod:`lss_kernels.model.offset`).
     init : tuple ``(cx, cy, rx, ry)``, boolean array ``(H, W)``, ``"auto"``, Point or Box
-        Initial foreground: an ellipse or a mask, in the frame ``init_frame``; or found from
-        the first consensus (:mod:`lss_kernels.model.init`; ``init_info`` says what was chosen,
-        ``initial_left`` holds it as a left-view mask).
+        Initial foreground: an ellipse (read as the box around it with
+        ``params.refine_ellipse``, :func:`lss_kernels.model.start.region_in_ellipse`) or a
+        mask, in the frame ``init_frame``; or found from the first consensus
+        (:mod:`lss_kernels.model.init`; ``init_info`` says what was chosen, ``initial_left``
+        holds it as a left-view mask).
     params : Params, optional
     arch : str, optional
         Taichi arch; initialises Taichi if given (else uses the current one, or the CPU).
@@ -221,69 +222,19 @@ class Solver:
 
     # ------------------------------------------------------------------ initialisation
     def _initial_mask(self, init, init_frame):
-        """The initial foreground in the cyclopean frame (:mod:`lss_kernels.model.start`);
-        also keeps it in the left view."""
-        self.init_info = {"kind": "mask" if isinstance(init, np.ndarray) else "ellipse"}
-        found = not isinstance(init, (np.ndarray, tuple))
-        if found:
-            t0 = time.perf_counter()
-            init, init_frame = self.initialiser.find(to_model_start(init, self.shift),
-                                                     self.hierarchy.consensus_mean,
-                                                     self.hierarchy.precision,
-                                                     left=self.left_image)
-            self.init_info = dict(info_to_user(self.initialiser.info, self.shift),
-                                  seconds=time.perf_counter() - t0)
-        else:
-            if init_frame == "left":    # the user's left view -> the model's
-                init = (to_model_left(init, self.shift) if isinstance(init, np.ndarray)
-                        else (init[0] + self.shift,) + tuple(init[1:]))
-            if isinstance(init, tuple) and self.params.refine_ellipse:
-                init, init_frame = self._region_in_ellipse(init, init_frame)
-        mask, left = cyclopean_start(init, init_frame,
-                                     self.extent.image(self.hierarchy.consensus_mean),
-                                     self.extent.image(self.hierarchy.precision))
-        self.initial_left = to_user_left(left, self.shift)
-        return mask
+        """The initial foreground in the cyclopean frame
+        (:func:`lss_kernels.model.start.initial_region`); also keeps it in the left view."""
+        h = self.hierarchy
 
-    def _region_in_ellipse(self, ellipse, frame):
-        """``Params.refine_ellipse``: the object under the ellipse's centre, cut to the box
-        around the ellipse (the start of a :class:`~lss_kernels.model.init.Box`), as
-        ``(mask, "cyclopean")``; ``(ellipse, frame)`` unchanged when no such region is found
-        (:meth:`InitialRegion.find` gives the box's inscribed ellipse back) or when that
-        region is not ``CONTRAST`` in front of the ring around it
-        (:func:`~lss_kernels.model.start.front_contrast`; in the notch of an L the centre
-        lies on the background).  ``ellipse`` is
-        in the model's left view or in the cyclopean frame (``frame``)."""
-        mean = self.extent.image(self.hierarchy.consensus_mean)
-        precision = self.extent.image(self.hierarchy.precision)
-        H, W = mean.shape
-        cx, cy, rx, ry = (float(v) for v in ellipse)
-        if frame == "cyclopean":        # x_left = x_c + c (lss_kernels.model.start)
-            y, x = np.mgrid[0:H, 0:W].astype(np.float64)
-            cx += foreground_shift(((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0,
-                                   mean, precision)
-        box = Box(max(cx - rx, 0.0), max(cy - ry, 0.0), min(cx + rx, W - 1.0),
-                  min(cy + ry, H - 1.0))
-        if box.x1 - box.x0 < 1.0 or box.y1 - box.y0 < 1.0:
-            self.init_info["region"] = "none: the ellipse's box lies outside the image"
-            return ellipse, frame
-        t0 = time.perf_counter()
-        found, found_frame = self.initialiser.find(box, self.hierarchy.consensus_mean,
-                                                   self.hierarchy.precision,
-                                                   left=self.left_image)
-        info = info_to_user(self.initialiser.info, self.shift)
-        self.init_info["seconds"] = time.perf_counter() - t0
-        if found_frame == "cyclopean":
-            info["front_contrast"] = contrast = 2.0 * front_contrast(found, mean, precision)
-            if not contrast > 2.0 * CONTRAST:    # e.g. in an L's notch: the background
-                found_frame = None
-                info["why"] = (f"the region under the centre is not in front of what "
-                               f"surrounds it ({contrast:.1f} px)")
-        if found_frame == "cyclopean":
-            self.init_info["region"] = info
-            return found, found_frame
-        self.init_info["region"] = f"none ({info['why']}): the ellipse itself"
-        return ellipse, frame
+        def find(start):
+            region, frame = self.initialiser.find(start, h.consensus_mean, h.precision,
+                                                  left=self.left_image)
+            return region, frame, self.initialiser.info, self.initialiser.grown
+
+        mask, self.initial_left, self.init_info = initial_region(
+            init, init_frame, self.shift, self.extent.image(h.consensus_mean),
+            self.extent.image(h.precision), find, self.params.refine_ellipse)
+        return mask
 
     def _first_consensus(self):
         """The consensus with no prior and no validity (Eqs. 4-6 brought down to pixels)."""

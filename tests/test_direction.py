@@ -186,6 +186,7 @@ def test_named_warnings_give_the_library_warnings_again_with_the_name_also_on_fa
                    (SwappedViewsWarning, "scene_b: the views look swapped")]
 
 
+@pytest.mark.slow
 def test_lss_eval_names_the_scene_whose_views_look_swapped(ti_arch, tmp_path, capsys):
     from lss_kernels.apps.cli import main
     from lss_kernels.scenes import write_scene

@@ -362,10 +362,18 @@ def test_front_contrast_on_hand_made_depths():
     obj = np.zeros(mean.shape, bool)
     obj[5:15, 10:20] = True
     assert front_contrast(obj, mean, precision, ring=3) == 4.0
-    # pixels without a consensus count on neither side, whatever their mean
-    mean[0:5, :] = 50.0
-    precision[0:5, :] = 0.0
+    # pixels without a consensus count on neither side, whatever their mean (here more than
+    # half of the ring: counted, they would make its median 50)
+    mean[0:5, :] = mean[:, 20:] = 50.0
+    precision[0:5, :] = precision[:, 20:] = 0.0
     assert front_contrast(obj, mean, precision, ring=3) == 4.0
+    # nor do excluded ones: the object's own pixels beyond a box's cut (below row 15 here)
+    mean[15:, :] = 6.0
+    assert front_contrast(obj, mean, precision, ring=3) < 4.0
+    beyond = np.zeros_like(obj)
+    beyond[15:, :] = True
+    assert front_contrast(obj, mean, precision, ring=3, exclude=beyond) == 4.0
+    mean[15:, :] = 2.0
     # the notch of an L: background, behind the object around most of it
     mean[5:10, 15:20] = 2.0
     notch = np.zeros_like(obj)

@@ -19,7 +19,10 @@ from lss_kernels.apps.bench import synthetic_pair
 from lss_kernels.params import Params
 
 H, W, D_MAX = 40, 56, 16
-PARAMS = Params(reinit_every=3, max_iterations=1000, stop_fraction=0.0)
+# the start is the scenes' ellipse as given: a region found in it (refine_ellipse) has rows of
+# constant phi beside its flat edges, where dphi/dx is a float32 or float64 round-off of zero
+# and the ray cast's direction the sign of that round-off (0.003 of phi seen at 61 pixels)
+PARAMS = Params(reinit_every=3, max_iterations=1000, stop_fraction=0.0, refine_ellipse=False)
 
 
 def _check(kernel, spec, theta_rtol=3e-3, phi_atol=1e-4):
@@ -158,6 +161,7 @@ def test_a_single_patch_level_matches_the_specification(fresh_taichi, width):
     solver.close()
 
 
+@pytest.mark.slow
 def test_the_background_sweep_sets_the_same_plane(fresh_taichi):
     """A textured object 11 px in front of a dark background of 8 grey levels under noise,
     the start inside the object: the first iteration's plane sweep sets Theta_2 to the same

@@ -227,6 +227,7 @@ def test_a_narrow_run_tilted_towards_the_camera_by_the_border_hides_nothing(geom
     assert not got.any() and not want.any()
 
 
+@pytest.mark.slow
 def test_a_solve_measures_its_strips_against_the_refined_box(ti_arch):
     """A box at 16 px stands between the object (24 px) and the wall (8 px), beside the
     object's left edge: one quadratic puts the wall there, and its strips are 16 px wide

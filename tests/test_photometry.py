@@ -68,6 +68,7 @@ def test_too_little_texture_gives_no_verdict():
     assert not facts["correct"] and "too narrow" in facts["why"]
 
 
+@pytest.mark.slow
 def test_the_solver_corrects_the_right_view_and_says_so(scene, ti_arch):
     from lss_kernels import Params, Solver
     right = _changed(scene.right, 1.0, 0.0, 0.08)

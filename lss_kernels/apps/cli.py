@@ -49,7 +49,9 @@ def _add_solve(subparsers):
     p.add_argument("--init", metavar="SPEC", help="initial foreground, left-view pixels: auto "
                    "(found from the first consensus; the default without an ellipse), "
                    "point:X,Y (the object under this pixel), box:X0,Y0,X1,Y1 (the object in "
-                   "this box), ellipse:CX,CY,RX,RY or mask:PATH (8-bit PNG, 255 = foreground)")
+                   "this box), ellipse:CX,CY,RX,RY (read as the box around it; as itself "
+                   "with --param refine_ellipse=false) or mask:PATH (8-bit PNG, 255 = "
+                   "foreground)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--arch", default=DEFAULT_ARCH, metavar="ARCH",
                    help=f"Taichi backend: {', '.join(ARCHES)} (default {DEFAULT_ARCH}: CUDA if a "

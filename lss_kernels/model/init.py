@@ -184,8 +184,8 @@ def shift_columns(mask: np.ndarray, shift: float) -> np.ndarray:
 
 @ti.data_oriented
 class InitialRegion:
-    """Fields and kernels that find the initial foreground from the first consensus
-    (all ``(H, W)``, cyclopean frame)."""
+    """Fields and kernels that find the initial foreground from the first consensus (all
+    ``(H, W)``, cyclopean frame); ``grown``: the last box's region before its cut."""
 
     def __init__(self, pool, H: int, W: int):
         self.H, self.W = H, W
@@ -195,7 +195,7 @@ class InitialRegion:
         self.inside = pool.field(ti.i32, (H, W))    # a region before widening or opening
         self.changed = pool.field(ti.i32, ())
         self.median = MedianFilter(pool, H, W, MEDIAN)
-        self.info = {}
+        self.info, self.grown = {}, None
 
     @ti.kernel
     def load(self, mean: ti.template(), precision: ti.template()):
@@ -385,7 +385,8 @@ class InitialRegion:
             shift = self.info["seed_disparity"] / 2.0        # x_left = x_c + c
             x = np.arange(self.W) + shift
             y = np.arange(self.H)
-            mask &= ((y >= box.y0) & (y < box.y1))[:, None] & ((x >= box.x0) & (x < box.x1))
+            self.grown, mask = mask, mask & ((y >= box.y0) & (y < box.y1))[:, None] & (
+                (x >= box.x0) & (x < box.x1))
             area = int(mask.sum())
             cover = area / max((box.x1 - box.x0) * (box.y1 - box.y0), 1.0)
             why = (f"the centre's region has {area} pixels in the box ({cover:.0%} of it), "
@@ -438,8 +439,7 @@ class InitialRegion:
     def _point(self, point):
         H, W = self.H, self.W
         d = self.d.to_numpy()
-        y = int(round(point.y))
-        xc = int(round(point.x))
+        y, xc = (min(max(int(round(v)), 0), n - 1) for v, n in ((point.y, H), (point.x, W)))
         for _ in range(3):                       # left view -> cyclopean: x_c = x - c(x_c)
             c = max(float(d[y, xc]), 0.0)
             xc = int(round(min(max(point.x - c, 0.0), W - 1.0)))
