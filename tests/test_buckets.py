@@ -254,8 +254,12 @@ print(json.dumps(added))
 """
 
 #: The kernels of a solve that compile once per image size (see
-#: lss_kernels.kernels.backend.Extent): they keep the float code of one size.
-PER_SIZE_KERNELS = ["_cost_from_children", "_ray_cast", "upward"]
+#: lss_kernels.kernels.backend.Extent): they keep the float code of one size.  The second
+#: list: those of the start's region (model/init.py, here an ellipse read as its box), whose
+#: fields have the image's own size, and Taichi's copy of such a field to numpy.
+PER_SIZE_KERNELS = sorted(["_cost_from_children", "_ray_cast", "upward"]
+                          + ["_sort", "_store", "grow", "keep_near", "load", "mark_near",
+                             "seed", "tensor_to_ext_arr"])
 
 
 @pytest.mark.slow
