@@ -1,13 +1,15 @@
 """The initial region in the cyclopean frame, from a start given in the left view or in the
-cyclopean frame (Sec. 4: the paper initialises phi from a region drawn by hand).
+cyclopean frame (Sec. 4: the paper initialises phi from a region drawn by hand); an ellipse is
+read as the box around it (:func:`region_in_ellipse`), other starts are found by
+:mod:`lss_kernels.model.init`.
 
 The frames differ by half the foreground's left-view disparity, ``x_left = x_c + c``; ``c`` is
 estimated as the median first-consensus mean (Eq. 7 with no prior) over the region read as if
 the frames coincided.
 """
-import numpy as np
-
 import time
+
+import numpy as np
 
 from .init import CONTRAST, Box, shift_columns
 from .offset import info_to_user, to_model_left, to_model_start, to_user_left
