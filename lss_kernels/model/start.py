@@ -14,8 +14,8 @@ import numpy as np
 from .init import CONTRAST, Box, shift_columns
 from .offset import info_to_user, to_model_left, to_model_start, to_user_left
 
-__all__ = ["cyclopean_start", "foreground_shift", "front_contrast", "initial_region",
-           "region_in_ellipse"]
+__all__ = ["cyclopean_start", "ellipse_mask", "foreground_shift", "front_contrast",
+           "initial_region", "region_in_ellipse"]
 
 #: Width of the ring around a region that :func:`front_contrast` compares it with, pixels.
 RING = 8
@@ -29,6 +29,14 @@ def foreground_shift(region: np.ndarray, mean: np.ndarray, precision: np.ndarray
     return float(np.median(mean[sel])) if sel.any() else 0.0
 
 
+def ellipse_mask(ellipse, shape: tuple, shift: float = 0.0) -> np.ndarray:
+    """The pixels of ``shape`` inside the ellipse ``(cx, cy, rx, ry)`` moved ``shift``
+    columns right."""
+    cx, cy, rx, ry = (float(v) for v in ellipse)
+    y, x = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
+    return ((x - cx - shift) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0
+
+
 def cyclopean_start(init, init_frame: str, mean: np.ndarray, precision: np.ndarray) -> tuple:
     """``(cyclopean, left)``: the boolean initial region in both frames.
 
@@ -38,9 +46,7 @@ def cyclopean_start(init, init_frame: str, mean: np.ndarray, precision: np.ndarr
     if isinstance(init, np.ndarray):
         region = lambda shift: shift_columns(init, shift)
     else:
-        cx, cy, rx, ry = (float(v) for v in init)
-        y, x = np.mgrid[0:mean.shape[0], 0:mean.shape[1]].astype(np.float64)
-        region = lambda shift: ((x - cx - shift) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0
+        region = lambda shift: ellipse_mask(init, mean.shape, shift)
     shift = foreground_shift(region(0.0), mean, precision)
     if init_frame == "left":
         return region(-shift), region(0.0)
@@ -99,9 +105,7 @@ def region_in_ellipse(ellipse, frame: str, mean: np.ndarray, precision: np.ndarr
     cx, cy, rx, ry = (float(v) for v in ellipse)
     shift = 0.0
     if frame == "cyclopean":
-        y, x = np.mgrid[0:H, 0:W].astype(np.float64)
-        shift = foreground_shift(((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0,
-                                 mean, precision)
+        shift = foreground_shift(ellipse_mask(ellipse, mean.shape), mean, precision)
     for _ in range(2):
         box = Box(max(cx + shift - rx, 0.0), max(cy - ry, 0.0), min(cx + shift + rx, W),
                   min(cy + ry, H))
@@ -116,7 +120,7 @@ def region_in_ellipse(ellipse, frame: str, mean: np.ndarray, precision: np.ndarr
             break
         shift = seed
     info["front_contrast"] = contrast = 2.0 * front_contrast(start, mean, precision,
-                                                             exclude=grown & ~start)
+                                                             exclude=grown)
     if contrast == -np.inf:
         return ellipse, frame, "none (no consensus around the object): the ellipse itself"
     if not contrast > 2.0 * CONTRAST:
