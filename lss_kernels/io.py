@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,7 +43,12 @@ def _imread(path, name: str) -> np.ndarray:
     if not path.is_file():
         raise FileNotFoundError(f"{name}: file not found: {path}")
     try:
-        return np.asarray(iio.imread(path))
+        with warnings.catch_warnings():
+            # imageio probes its plugins in turn and some warn of their own deprecation
+            # (or leave a file open) on a file none can read: nothing a user can act on
+            warnings.simplefilter("ignore", DeprecationWarning)
+            warnings.simplefilter("ignore", ResourceWarning)
+            return np.asarray(iio.imread(path))
     except Exception as exc:  # imageio raises many types; all mean "not an image"
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ValueError(f"{name}: could not read as an image: {path} ({detail})") from exc
