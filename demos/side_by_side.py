@@ -5,8 +5,9 @@
 The base commit's package is exported with ``git archive`` into a temporary folder and run
 through its own ``lss`` entry point (read from its ``pyproject.toml``) with the interpreter
 and packages of this environment; the working tree is the other side.  A warm-up pass runs
-each side once on every scene (so both find their kernels in Taichi's offline cache), then
-each scene is solved by both sides, alternating which goes first.  The machine's noise
+each side once on every scene (so both find their kernels in Taichi's offline cache, one
+cache per side, each side with its own size limit), then each scene is solved by both sides,
+alternating which goes first.  The machine's noise
 hits both sides alike; the table gives per-scene wall seconds of the whole process,
 iterations and occlusion F1 of each, and the median ratio.  ``--init gt-box`` (or
 ``gt-point``, ``auto``) starts both from the bounding box (centroid) of each scene's true
@@ -55,15 +56,16 @@ def start(scene: Path, init: str) -> list:
     return ["--init", f"box:{place.x0:g},{place.y0:g},{place.x1:g},{place.y1:g}"]
 
 
-def solve(tree: Path, scene: Path, out: Path, arch: str, init: str = "scene") -> dict:
+def solve(tree: Path, scene: Path, out: Path, cache: Path, arch: str,
+          init: str = "scene") -> dict:
     """One ``lss solve --scene`` process of ``tree``'s package (started as ``init`` says,
-    see :func:`start`): wall seconds, iterations and occlusion F1 (from its summary.json).
-    It runs in ``out``'s parent, so that the working directory cannot shadow ``tree`` on
-    ``sys.path``."""
+    see :func:`start`) with Taichi's offline cache in ``cache``: wall seconds, iterations and
+    occlusion F1 (from its summary.json).  It runs in ``out``'s parent, so that the working
+    directory cannot shadow ``tree`` on ``sys.path``."""
     out.parent.mkdir(parents=True, exist_ok=True)
     module, function = entry_point(tree)
     code = f"import sys; from {module} import {function} as m; sys.exit(m(sys.argv[1:]))"
-    env = dict(os.environ, PYTHONPATH=str(tree))
+    env = dict(os.environ, PYTHONPATH=str(tree), TI_OFFLINE_CACHE_FILE_PATH=str(cache))
     command = [sys.executable, "-c", code, "solve", "--scene", str(scene), "--out", str(out),
                "--arch", arch, "--quiet"] + start(scene, init)
     began = time.perf_counter()
@@ -100,29 +102,34 @@ def main(argv=None) -> int:
         tmp = Path(tmp)
         (tmp / "base").mkdir()
         sides = {"base": export(args.base, tmp / "base"), "head": ROOT}
+        # each side keeps its kernels in an offline cache of its own, so that one side's
+        # cache cleaning (each with its own size limit) cannot evict the other's kernels
+        caches = {name: tmp / "cache" / name for name in sides}
         if not args.no_warmup:
             for scene in scenes:
                 for name, tree in sides.items():
                     print(f"warm-up {name} {scene.name}", file=sys.stderr, flush=True)
-                    solve(tree, scene, tmp / "warm", args.arch, args.init)
+                    solve(tree, scene, tmp / "warm", caches[name], args.arch, args.init)
         rows = []
         for i, scene in enumerate(scenes):
             order = ["base", "head"] if i % 2 == 0 else ["head", "base"]
             row = {"scene": scene.name}
             for name in order:
-                row[name] = solve(sides[name], scene, tmp / name / "out", args.arch,
-                                  args.init)
+                row[name] = solve(sides[name], scene, tmp / name / "out", caches[name],
+                                  args.arch, args.init)
             rows.append(row)
             print(f"{scene.name}: base {row['base']['seconds']:.1f} s, head "
                   f"{row['head']['seconds']:.1f} s", file=sys.stderr, flush=True)
-    table = render(rows, args.base, args.init)
+        sizes = {name: sum(f.stat().st_size for f in caches[name].rglob("*") if f.is_file())
+                 for name in sides}
+    table = render(rows, args.base, args.init, sizes)
     print(table)
     if args.out:
         Path(args.out).write_text(table)
     return 0
 
 
-def render(rows, base: str, init: str = "scene") -> str:
+def render(rows, base: str, init: str = "scene", cache_bytes=None) -> str:
     started = "" if init == "scene" else f", `--init {init}`"
     lines = [f"Whole `lss solve --scene` processes{started}, warm caches, base = `{base}`, "
              "head = the working tree (`demos/side_by_side.py`)", "",
@@ -144,6 +151,9 @@ def render(rows, base: str, init: str = "scene") -> str:
                  f"{med('head', 'seconds'):.1f} | {ratio:.2f} | "
                  f"{med('base', 'iterations'):.0f} | {med('head', 'iterations'):.0f} | "
                  f"{mean('base', 'f1'):.3f} | {mean('head', 'f1'):.3f} |")
+    if cache_bytes:
+        lines += ["", "Offline cache at the end: " + ", ".join(
+            f"{name} {size / 2 ** 20:.0f} MiB" for name, size in cache_bytes.items())]
     return "\n".join(lines) + "\n"
 
 

@@ -2,6 +2,7 @@
 Taichi's own text."""
 import ast
 import inspect
+import os
 import textwrap
 from types import SimpleNamespace
 
@@ -118,7 +119,7 @@ seen = []
 def solve(d_max):
     # ten iterations: the prior, the upward pass and a re-initialisation; then the left view
     s = Solver(scene.left, scene.right, d_max, scene.init_ellipse,
-               params=Params(max_iterations=10, stop_fraction=0.0))
+               params=Params(max_iterations=10, stop_shift=0.0))
     s.run()
     s.left_view()
     s.close()
@@ -155,6 +156,24 @@ def test_kernels_without_volumes_are_cached_across_search_ranges(tmp_path, ti_ar
     assert kernels(first) and new, "the second range should compile its volume kernels"
     assert len(new) <= len(kernels(first)) // 2, (len(new), len(kernels(first)))
     assert kernels(third) == kernels(second), "the first range again compiled anew"
+
+
+def test_offline_cache_holds_a_gigabyte_unless_the_environment_says(ti_arch):
+    """Taichi's default 100 MB evicts kernels a pass over a few image sizes needs again;
+    ``TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES`` still overrides the library's limit."""
+    import subprocess
+    import sys
+    from lss_kernels.kernels import backend
+    code = ("from lss_kernels.kernels import backend; import taichi as ti; "
+            "backend.init('cpu'); print(ti.lang.impl.current_cfg().offline_cache_max_size_of_files)")
+    env = {k: v for k, v in os.environ.items() if k != "TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES"}
+
+    def limit(**extra):
+        done = subprocess.run([sys.executable, "-c", code], env=dict(env, **extra),
+                              capture_output=True, text=True, check=True)
+        return int(done.stdout.split()[-1])
+    assert limit() == backend.OFFLINE_CACHE_BYTES == 1 << 30
+    assert limit(TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES="12345") == 12345
 
 
 def test_auto_runs_on_the_cpu_with_one_line_when_no_gpu_answers(monkeypatch):
@@ -205,7 +224,7 @@ scene = make_scene("tiny")
 for refine in sys.argv[2].split(","):
     # three iterations: the prior and validity enter at the second
     solve(scene.left, scene.right, scene.d_max, scene.init_ellipse,
-          params=Params(max_iterations=3, stop_fraction=0.0, refine=refine == "refine",
+          params=Params(max_iterations=3, stop_shift=0.0, refine=refine == "refine",
                         recover=False))
 """
 

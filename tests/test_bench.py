@@ -133,6 +133,8 @@ def test_side_by_side_table_has_per_scene_ratios_and_medians():
     # medians: base 9.0 s, head 5.0 s, ratio median(2, 1, 4.5) = 2, iterations 300 / 120;
     # F1 means 0.7 / 0.7
     assert lines[-1] == "| **median** (F1: mean) | 9.0 | 5.0 | 2.00 | 300 | 120 | 0.700 | 0.700 |"
+    sized = sbs.render(rows, "abc123", cache_bytes={"base": 3 << 20, "head": 150 << 20})
+    assert sized.splitlines()[-1] == "Offline cache at the end: base 3 MiB, head 150 MiB"
 
 
 def test_side_by_side_starts_from_the_true_foregrounds_box_or_centroid(tmp_path):
@@ -153,18 +155,21 @@ def test_side_by_side_starts_from_the_true_foregrounds_box_or_centroid(tmp_path)
 
     # a solve passes the start on to its process and reads the process's summary
     import types
-    seen = []
+    seen, caches = [], []
 
     def run(command, **kwargs):
         seen.append(command)
+        caches.append(kwargs["env"]["TI_OFFLINE_CACHE_FILE_PATH"])
         out = Path(command[command.index("--out") + 1])
         out.mkdir(parents=True)
         (out / "summary.json").write_text(json.dumps({"iterations": 60,
                                                       "score": {"occ_f1": 0.9}}))
         return types.SimpleNamespace(returncode=0, stderr="")
     sbs.subprocess = types.SimpleNamespace(run=run)
-    got = sbs.solve(sbs.ROOT, tmp_path, tmp_path / "head" / "out", "cpu", "gt-box")
+    got = sbs.solve(sbs.ROOT, tmp_path, tmp_path / "head" / "out", tmp_path / "cache" / "head",
+                    "cpu", "gt-box")
     assert seen[0][-2:] == ["--init", "box:6,4,21,10"] and "solve" in seen[0]
+    assert caches == [str(tmp_path / "cache" / "head")]          # the side's own cache
     assert got["iterations"] == 60 and got["f1"] == 0.9 and got["seconds"] >= 0
 
 

@@ -4,6 +4,7 @@ offline cache keeps compiled kernels on disk, so a second run skips most of the 
 """
 import gc
 import os
+import sys
 import weakref
 
 import numpy as np
@@ -27,6 +28,11 @@ ROWS_DISPARITIES_COLUMNS = (0, 2, 1)
 
 #: GPU backends that ``"gpu"`` tries, in order.
 GPU_ARCHES = ("cuda", "vulkan", "metal")
+
+#: Taichi's offline cache limit (its 100 MB default drops the least recently used quarter
+#: once a few image sizes' kernels outgrow it; a process then compiles for tens of seconds
+#: what it loaded in a few).  ``TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES`` (bytes) overrides it.
+OFFLINE_CACHE_BYTES = 1 << 30
 
 _probed = {}
 
@@ -57,7 +63,6 @@ def probe(arch: str, timeout: float = 60.0) -> tuple:
         answer = (False, f"no {arch} driver library")
     else:
         import subprocess
-        import sys
         code = (f"import taichi as ti; ti.init(arch=ti.{arch}, enable_fallback=False, "
                 f"offline_cache=False, log_level=ti.ERROR)")
         env = dict(os.environ, ENABLE_TAICHI_HEADER_PRINT="0")
@@ -96,11 +101,6 @@ def resolve(arch: str, log=None) -> str:
     return arch
 
 
-def _stderr_line(text):
-    import sys
-    print(text, file=sys.stderr)
-
-
 def init(arch: str | None = None, threads: int | None = None, offline_cache: bool = True,
          debug: bool = False, reuse_kernels: bool | None = None, kernel_profiler=None) -> str:
     """Initialise Taichi once per process; returns the backend in use (``"cpu"``, ...).
@@ -115,7 +115,7 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
     threads : int or None
         CPU threads for the CPU backend (``None``: Taichi's default, all cores).
     offline_cache : bool
-        Keep compiled kernels on disk between runs.
+        Keep compiled kernels on disk between runs (up to :data:`OFFLINE_CACHE_BYTES`).
     reuse_kernels : bool or None
         Let every new solver start Taichi again first when none of the library's fields is
         alive (:func:`fresh_numbering`), so that it loads the kernels compiled for its size
@@ -126,17 +126,15 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
         kernels compile again under it).  ``None`` keeps the current setting (``False``).
 
     Calling again with the same settings is a no-op; different settings re-initialise Taichi
-    (every field allocated before becomes invalid, so do this before building a solver).
-    """
-    if arch is None:
-        arch = _state["arch"] or "cpu"
+    (every field allocated before becomes invalid: do this before building a solver)."""
+    arch = (_state["arch"] or "cpu") if arch is None else arch
     if arch not in ARCHES:
         raise ValueError(f"arch: expected one of {', '.join(ARCHES)}, got {arch!r}")
     if threads is not None and (not isinstance(threads, int) or threads < 1):
         raise ValueError(f"threads: expected a positive integer, got {threads!r}")
     if reuse_kernels is not None:
         _state["reuse"] = bool(reuse_kernels)
-    arch = resolve(arch, log=_stderr_line)
+    arch = resolve(arch, log=lambda text: print(text, file=sys.stderr))
     on = bool((_state["kwargs"] or {}).get("kernel_profiler"))
     profiling = on if kernel_profiler is None else bool(kernel_profiler)
     if _state["arch"] == arch and _state["threads"] == threads and on == profiling:
@@ -146,6 +144,8 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
                   unrolling_limit=0, kernel_profiler=profiling)
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
+    if offline_cache and not os.environ.get("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES"):
+        kwargs["offline_cache_max_size_of_files"] = OFFLINE_CACHE_BYTES
     if kwargs["arch"] == ti.cpu:
         # Taichi's CFG passes (store forwarding, dead stores) are quadratic in the length of
         # a kernel's body and took ~half the compile time of the median's selection network
