@@ -83,7 +83,7 @@ def profile(scene, arch: str, warmup: int, iterations: int) -> tuple:
     from lss_kernels.solver import Solver
     backend.init(arch=arch, kernel_profiler=True)
     init, frame = scene_init(scene)
-    params = Params(stop_fraction=0.0, max_iterations=warmup + iterations)
+    params = Params(stop_shift=0.0, max_iterations=warmup + iterations)
     solver = Solver(scene.left, scene.right, scene.d_max, init, params=params,
                     init_frame=frame)
     try:

@@ -14,8 +14,9 @@ One iteration (as in the authors' release, with everything a data-parallel kerne
    the median filter;
 8. D = H(phi) Theta_1 + (1 - H(phi)) Theta_2 (Eq. 3), written by the median's last pass.
 
-The host reads two integers per iteration (flipped pixels and foreground area) for the stopping
-rule, and ``c_max + 2`` numbers per sweep; nothing else leaves the device inside the loop.
+The host reads two integers per iteration (flipped pixels, foreground area), one number per
+re-initialisation and two per stop window for the stopping rule, and ``c_max + 2`` numbers
+per sweep; nothing else leaves the device inside the loop.
 """
 import time
 
@@ -124,10 +125,8 @@ class Solver:
         H, W = self.H, self.W
         check_memory(H, W, 2 * C)       # before the first field: a new pool's allocation
         self.c_max = C
-        # every field of the solve has the shape of the image's size bucket, and the kernels
-        # read H and W from the extent at run time: they compile once per bucket (and range)
-        pool = FieldPool()
-        self.pool = pool
+        # fields of the size bucket's shape, H and W read at run time: compiled once per bucket
+        self.pool = pool = FieldPool()
         self.extent = pool.extent(H, W)
         self.left = pool.vector(3, ti.f32, self.extent.bucket, bucket=True)
         self.right = pool.vector(3, ti.f32, self.extent.bucket, bucket=True)
@@ -199,7 +198,8 @@ class Solver:
         self.done = False
         self.stop_reason = None
         self.history = []
-        self._moving = 1.0
+        self._shift = self._surface = None   # no window has ended yet
+        self._moved = 0.0
         self._rule = StopRule(self.params)
         self.levelset.net_change()
         self._t_loop = 0.0
@@ -317,32 +317,37 @@ class Solver:
         reinit = self.iteration % p.reinit_every == 0
         # the median's last pass also writes D (Eq. 3) from the new phi
         ls.evolve(hier.matching_cost, self.c_max, self.shapes, self.occ, p, reinit)
+        if reinit and p.stop_shift > 0 and p.stop_surface > 0:  # since the last re-init
+            self.shapes.moved(ls.phi)
+            self._moved = max(self._moved, 2.0 * float(self.shapes.change[None]))
         t = self._stage("levelset", t)
         flipped, area = int(ls.flipped[None]), int(ls.area[None])
         seconds = time.perf_counter() - t_iter
         self._t_loop += seconds
         if self._rule.is_window_end(self.iteration):
             ls.net_change()
-            self._moving = int(ls.changed[None]) / max(area, 1)
-            self._rule.record(self._moving)
-        moving = self._moving
-        stats = dict(iteration=self.iteration, flipped=flipped, moving_fraction=moving,
-                     fg_fraction=area / float(self.H * self.W), seconds=seconds,
+            self._shift = int(ls.changed[None]) / max(int(ls.boundary[None]), 1)
+            self._surface, self._moved = self._moved, 0.0
+            self._rule.record(self._shift, self._surface)
+        stats = dict(iteration=self.iteration, flipped=flipped, boundary_shift=self._shift,
+                     surface_change=self._surface, fg_fraction=area / float(self.H * self.W),
+                     seconds=seconds,
                      background_plane=None if plane is None else 2.0 * plane - self.offset)
         self.history.append(stats)
-        self._check_stop(area, moving)
+        self._check_stop(area, self._shift)
         return stats
 
-    def _check_stop(self, area, moving):
+    def _check_stop(self, area, shift):
         p = self.params
         if area == 0:
             self.stop_reason = f"foreground vanished at iteration {self.iteration}"
         elif area == self.H * self.W:
             self.stop_reason = f"foreground filled the image at iteration {self.iteration}"
         elif self._rule.converged(self.iteration):
-            self.stop_reason = (f"converged at iteration {self.iteration}: the foreground "
-                                f"changed by {moving:.4f} of its area over the last "
-                                f"{p.stop_window} iterations (< {p.stop_fraction} in "
+            self.stop_reason = (f"converged at iteration {self.iteration}: the boundary "
+                                f"shifted by {shift:.3f} px and the surfaces by "
+                                f"{self._surface:.2f} px over the last {p.stop_window} "
+                                f"iterations (< {p.stop_shift} and {p.stop_surface} px in "
                                 + ("its last window)" if self._rule.quiet == 1 else
                                    f"{self._rule.quiet} windows in a row)"))
         elif self.iteration >= p.max_iterations:

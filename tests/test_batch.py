@@ -130,7 +130,7 @@ def test_a_worker_killed_in_the_middle_leaves_no_half_written_folder(scenes, clu
     batch = threading.Thread(target=lambda: finished.update(report=_batch(
         [scenes / n for n in SCENES], out, scheduler=cluster.scheduler_address,
         # pairs of a few seconds: long enough to be killed in the middle
-        params=Params(max_iterations=400, stop_fraction=0.0))))
+        params=Params(max_iterations=400, stop_shift=0.0))))
     batch.start()
     deadline = time.monotonic() + 60
     while not (partials := list(out.glob(".*.partial-*"))):

@@ -168,7 +168,7 @@ def test_lss_scenes_of_one_size_share_a_solver_and_match_a_fresh_solve(dataset, 
 def test_trace_scores_every_stop_window_and_replays_the_rule(dataset, tmp_path):
     import imageio.v3 as iio
     from lss_kernels.stopping import replay
-    params = Params(max_iterations=40, min_iterations=10, stop_window=5, stop_fraction=0.01)
+    params = Params(max_iterations=40, min_iterations=10, stop_window=5, stop_shift=0.5)
     rows = run_eval(dataset, methods=("lss",), out=tmp_path, params=params, progress=False,
                     trace=True)
     n = 0
@@ -185,7 +185,7 @@ def test_trace_scores_every_stop_window_and_replays_the_rule(dataset, tmp_path):
     with open(tmp_path / "convergence.csv") as f:
         assert len(list(csv.reader(f))) == n + 1
     md = (tmp_path / "convergence.md").read_text()
-    assert "| stop_fraction | min_iterations |" in md and "| 0.01 | 10 |" in md
+    assert "| stop_shift | min_iterations |" in md and "| 0.5 | 10 |" in md
     tables = [line for line in md.splitlines() if line.startswith("|")]
     header, separator = tables[0], tables[1]
     assert header.count("|") == separator.count("|")       # a table Markdown renders

@@ -697,6 +697,68 @@ def test_settle_counts_sign_flips_and_writes_eq3(ti_arch, k):
     pool.destroy()
 
 
+def test_net_change_counts_changed_labels_and_the_boundary(ti_arch):
+    """``LevelSet.net_change`` (the stopping rule's measure): ``changed`` counts the pixels
+    whose label (phi > 0) differs from the last call's, ``boundary`` the foreground pixels
+    with a 4-neighbour of the background inside the image (the image's own edge is not a
+    boundary)."""
+    from lss_kernels.model.levelset import LevelSet
+    pool = FieldPool()
+    ls = LevelSet(pool, 9, 14, Params())
+    pool.finalize()
+    rng = np.random.default_rng(7)
+    y, x = np.mgrid[0:9, 0:14]
+    first = (4.0 - np.hypot(x - 2.0, y - 4.0)).astype(np.float32)   # a disc cut by the edge
+    second = first + 0.3 * rng.standard_normal((9, 14)).astype(np.float32)
+
+    def boundary(fg):
+        p = np.pad(fg, 1, mode="edge")
+        inner = p[:-2, 1:-1] & p[2:, 1:-1] & p[1:-1, :-2] & p[1:-1, 2:]
+        return int((fg & ~inner).sum())
+
+    ls.phi.from_numpy(ls.extent.padded(first))
+    ls.net_change()
+    assert ls.boundary[None] == boundary(first > 0) == 15    # rows 1 and 7, and x = 5
+    ls.phi.from_numpy(ls.extent.padded(second))
+    ls.net_change()
+    changed = ((second > 0) != (first > 0)).sum()
+    assert ls.changed[None] == changed > 0
+    assert ls.boundary[None] == boundary(second > 0)
+    ls.net_change()                                   # the reference was renewed
+    assert ls.changed[None] == 0
+    pool.destroy()
+
+
+def test_moved_measures_each_pixel_on_its_own_layers_shape(ti_arch):
+    """``GlobalShapes.moved``: the largest |Theta_j - reference_j| over the image, with j the
+    pixel's own layer (0 where phi > 0), against numpy; then the reference is Theta."""
+    from lss_kernels.model.levelset import LevelSet
+    from lss_kernels.model.shapes import GlobalShapes, basis
+    pool = FieldPool()
+    ls = LevelSet(pool, 9, 14, Params())
+    shapes = GlobalShapes(pool, 9, 14)
+    pool.finalize()
+    y, x = np.mgrid[0:9, 0:14]
+    phi = np.where(x < 5, 1.0, -1.0).astype(np.float32)       # the foreground: x < 5
+    ls.phi.from_numpy(ls.extent.padded(phi))
+    before = np.array([[0.0, 0.0, 0.0, 1.0, 0.0, 5.0], [0.0, 0.0, 0.0, 0.0, 0.0, 2.0]])
+    # Theta_1 moves by 3 x_n + 1: 1.79 at x = 0 in the foreground, 3.79 at x = 13 outside it
+    # (which must not count); Theta_2 by 0.25 everywhere
+    after = before + np.array([[0.0, 0.0, 0.0, 3.0, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0, 0.0, 0.25]])
+    shapes.set(before[0], before[1])
+    shapes.moved(ls.phi)
+    shapes.set(after[0], after[1])
+    shapes.moved(ls.phi)
+    z = basis((x - shapes.cx) * shapes.inv_s, (y - shapes.cy) * shapes.inv_s)
+    change = np.abs(z @ (after - before).T)                    # (9, 14, 2)
+    want = max(change[..., 0][x < 5].max(), change[..., 1][x >= 5].max())
+    assert want == pytest.approx(3.0 * 6.5 / 7.0 - 1.0)      # Theta_1 at x = 0
+    assert shapes.change[None] == pytest.approx(want, rel=1e-5)
+    shapes.moved(ls.phi)                                       # the reference was renewed
+    assert shapes.change[None] == 0.0
+    pool.destroy()
+
+
 def _census_words(image):
     """:func:`lss_kernels.reference.kernels.census` packed as the kernel's two words."""
     bits = ref.census(image).astype(np.uint32)

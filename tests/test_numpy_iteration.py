@@ -22,7 +22,7 @@ H, W, D_MAX = 40, 56, 16
 # the start is the scenes' ellipse as given: a region found in it (refine_ellipse) has rows of
 # constant phi beside its flat edges, where dphi/dx is a float32 or float64 round-off of zero
 # and the ray cast's direction the sign of that round-off (0.003 of phi seen at 61 pixels)
-PARAMS = Params(reinit_every=3, max_iterations=1000, stop_fraction=0.0, refine_ellipse=False)
+PARAMS = Params(reinit_every=3, max_iterations=1000, stop_shift=0.0, refine_ellipse=False)
 
 
 def _check(kernel, spec, theta_rtol=3e-3, phi_atol=1e-4):

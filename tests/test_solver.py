@@ -221,7 +221,7 @@ def test_shape_weights_drop_consensus_that_points_outside_the_other_image(ti_arc
 @pytest.mark.parametrize("patience", [1, 3])
 def test_stopping_rule_waits_for_patience_quiet_windows(ti_arch, patience):
     scene = make_scene("easy")
-    params = Params(stop_fraction=0.99, stop_window=5, stop_patience=patience,
+    params = Params(stop_shift=1e9, stop_surface=1e9, stop_window=5, stop_patience=patience,
                     min_iterations=0)
     result = solve(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=params)
     assert result.iterations == 5 * patience

@@ -5,20 +5,21 @@ import pytest
 from lss_kernels.params import Params
 from lss_kernels.stopping import StopRule, replay
 
-P = Params(stop_window=10, stop_fraction=0.01, stop_patience=2, min_iterations=30,
+P = Params(stop_window=10, stop_shift=0.01, stop_patience=2, min_iterations=30,
            max_iterations=100)
 
 
-def _windows(moving, window=10):
-    return [{"iteration": window * (i + 1), "moving_fraction": m, "tag": i}
-            for i, m in enumerate(moving)]
+def _windows(moving, window=10, surfaces=None):
+    surfaces = surfaces or [0.0] * len(moving)
+    return [{"iteration": window * (i + 1), "boundary_shift": m, "surface_change": s, "tag": i}
+            for i, (m, s) in enumerate(zip(moving, surfaces))]
 
 
 def test_rule_needs_patience_quiet_windows_in_a_row():
     rule = StopRule(P)
     fired = []
     for entry in _windows([0.5, 0.001, 0.5, 0.001, 0.002, 0.001]):
-        rule.record(entry["moving_fraction"])
+        rule.record(entry["boundary_shift"], entry["surface_change"])
         fired.append(rule.converged(entry["iteration"]))
     # quiet counts: 0, 1, 0, 1, 2, 3 -> the first stop at the fifth window (iteration 50)
     assert fired == [False, False, False, False, True, True]
@@ -33,20 +34,29 @@ def test_quiet_windows_before_min_iterations_count_towards_patience():
 
 def test_rule_never_fires_off_a_window_end_or_when_disabled():
     rule = StopRule(P)
-    rule.record(0.0)
-    rule.record(0.0)
+    rule.record(0.0, 0.0)
+    rule.record(0.0, 0.0)
     assert rule.converged(40) and not rule.converged(41)
-    off = StopRule(Params(stop_fraction=0.0))
-    off.record(0.0)
-    off.record(0.0)
+    off = StopRule(Params(stop_shift=0.0))
+    off.record(0.0, 0.0)
+    off.record(0.0, 0.0)
     assert not off.converged(off.min_iterations)
+
+
+def test_a_window_whose_surfaces_moved_is_not_quiet():
+    """A settled boundary over a model that still moves (``surface_change`` at or above
+    ``stop_surface``) does not count; ``stop_surface = 0`` leaves the surfaces out."""
+    windows = _windows([0.001] * 5, surfaces=[0.0, 2.0, 1.0, 0.5, 0.5])   # P: 1.0 px
+    assert replay(windows, P) == (windows[4], True)      # quiet: windows 0, 3, 4
+    assert replay(windows, P, stop_surface=0.0) == (windows[2], True)  # min_iterations 30
+    assert replay(windows, P, stop_surface=2.5) == (windows[2], True)
 
 
 def test_replay_variants_and_the_end_of_the_record():
     windows = _windows([0.5, 0.02, 0.02, 0.005, 0.005, 0.002])
     assert replay(windows, P) == (windows[4], True)                     # 0.01: windows 4, 5
-    assert replay(windows, P, stop_fraction=0.03) == (windows[2], True)  # from window 2
-    assert replay(windows, P, stop_fraction=0.001) == (windows[-1], False)
+    assert replay(windows, P, stop_shift=0.03) == (windows[2], True)  # from window 2
+    assert replay(windows, P, stop_shift=0.001) == (windows[-1], False)
     assert replay(windows, P, max_iterations=20) == (windows[1], True)
     with pytest.raises(ValueError, match="empty"):
         replay([], P)
@@ -57,7 +67,8 @@ def test_replay_of_a_solver_history_gives_its_stop(ti_arch):
     from lss_kernels.scenes import make_scene
     from lss_kernels.solver import Solver
     scene = make_scene("easy")
-    params = Params(min_iterations=20, stop_window=10, stop_fraction=0.01)
+    params = Params(min_iterations=20, stop_window=10, stop_shift=0.5, stop_surface=2.0,
+                    stop_patience=2)
     solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse, params=params)
     result = solver.run()
     solver.close()
@@ -66,4 +77,4 @@ def test_replay_of_a_solver_history_gives_its_stop(ti_arch):
     entry, fired = replay(windows, params)
     assert fired and entry["iteration"] == result.iterations
     # a stricter rule would have run longer: the record ends first
-    assert replay(windows, params, stop_fraction=params.stop_fraction / 1e6)[1] is False
+    assert replay(windows, params, stop_shift=params.stop_shift / 1e6)[1] is False

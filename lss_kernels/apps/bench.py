@@ -197,7 +197,7 @@ def measure(width, height, d_max, iterations=3, numpy_iterations=0, seed=0, para
     from ..reference import iteration as npi
     from ..params import Params
     from ..solver import Solver
-    params = params if params is not None else Params(max_iterations=10 ** 6, stop_fraction=0.0)
+    params = params if params is not None else Params(max_iterations=10 ** 6, stop_shift=0.0)
     left, right, init = synthetic_pair(width, height, d_max, seed)
     t = time.perf_counter()
     solver = Solver(left, right, d_max, init, params=params, profile=True)

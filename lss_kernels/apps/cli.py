@@ -21,6 +21,7 @@ if "--json" in sys.argv[1:]:
 
 from .. import __version__  # noqa: E402
 from ..kernels.backend import ARCHES, DEFAULT_ARCH  # noqa: E402
+from ..stopping import format_shift  # noqa: E402
 
 __all__ = ["main"]
 
@@ -138,7 +139,7 @@ def _range_hint(left, right):
 
 
 class Progress:
-    """A progress bar (rich) with the iteration, the moving fraction and s/iteration."""
+    """A progress bar (rich) with the iteration, the boundary's shift and s/iteration."""
 
     def __init__(self, total, quiet):
         self.quiet = quiet
@@ -156,7 +157,7 @@ class Progress:
     def __call__(self, solver, stats):
         if self.bar is not None:
             self.bar.update(self.task, completed=stats["iteration"],
-                            info=f"moving {stats['moving_fraction']:.4f}  "
+                            info=f"shift {format_shift(stats['boundary_shift'])}  "
                                  f"{stats['seconds']:.3f} s/it")
 
     def close(self):

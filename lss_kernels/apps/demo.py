@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from .. import viz
+from ..stopping import format_shift
 from . import figures
 
 __all__ = ["run_demo", "add_cli", "main_demo", "parse_init", "parse_patch", "default_patch",
@@ -188,7 +189,7 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
             line = f"iter {it:5d}"
             if last_info:
                 line += (f"  flipped {last_info['flipped']:6d}  fg {last_info['fg_fraction']:.3f}"
-                         f"  moving {last_info['moving_fraction']:.4f}"
+                         f"  shift {format_shift(last_info['boundary_shift'])}"
                          f"  step {1e3 * last_info['seconds']:7.1f} ms")
             if scores:
                 line += (f"  occ F1 {float(scores['occ_f1']):.3f}"

@@ -114,7 +114,8 @@ def _solve(scene: io.Scene, params, trace: bool = False, init=None):
             start = time.perf_counter()
             disparity, occlusion, _ = s.left_view()
             score = metrics.score(disparity, occlusion, scene, masks)
-            rows.append({"iteration": s.iteration, "moving_fraction": stats["moving_fraction"],
+            rows.append({"iteration": s.iteration, "boundary_shift": stats["boundary_shift"],
+                         "surface_change": stats["surface_change"],
                          "fg_fraction": stats["fg_fraction"],
                          "occ_f1": float(score["occ_f1"]), "bad4": float(score["bad4"])})
             spent[0] += time.perf_counter() - start

@@ -106,7 +106,7 @@ def write_table(path: Path, rows, names, methods, dataset_dir: Path) -> None:
 
 
 #: Variants of the stopping rule that ``convergence.md`` replays, as multiples of the run's
-#: ``stop_fraction`` and ``min_iterations``.
+#: ``stop_shift`` and ``min_iterations``.
 RULE_VARIANTS = ((1.0, 1.0), (1.0, 0.5), (1.5, 1.0), (1.5, 0.5), (2.5, 1.0), (5.0, 1.0))
 
 
@@ -114,13 +114,16 @@ def write_convergence(out: Path, records, params, missing=()) -> None:
     """convergence.csv / .md / .png from the traces of ``lss`` runs (see ``run_eval``);
     ``missing``: the scenes whose lss run has no trace."""
     from .. import viz
-    keys = ("iteration", "moving_fraction", "fg_fraction", "occ_f1", "bad4")
+    keys = ("iteration", "boundary_shift", "surface_change", "fg_fraction", "occ_f1", "bad4")
     with open(out / "convergence.csv", "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(("scene",) + keys)
         for r in records:
             for row in r["trace"]:
-                writer.writerow([r["scene"]] + [f"{row[k]:.6g}" for k in keys])
+                # the shift and surface change are None in a run that ended before its
+                # first window
+                writer.writerow([r["scene"]] + ["" if row[k] is None else f"{row[k]:.6g}"
+                                                for k in keys])
 
     last = max(r["trace"][-1]["iteration"] for r in records)
     # columns every ~100 iterations, on the recorded window ends
@@ -140,22 +143,20 @@ def write_convergence(out: Path, records, params, missing=()) -> None:
         text += ["", f"Not traced (finished by an earlier call without --trace; rerun them "
                      f"with --force): {', '.join(missing)}."]
     text += ["", "## Variants of the stopping rule, replayed on these runs", "",
-             f"The runs used stop_fraction {params.stop_fraction}, min_iterations "
+             f"The runs used stop_shift {params.stop_shift}, min_iterations "
              f"{params.min_iterations}, stop_window {params.stop_window}, stop_patience "
              f"{params.stop_patience}. A variant can only be replayed up to where the run "
              "stopped: *ended* counts the runs whose record ended before the variant fired. "
              "bad-4.0 here is that of the two quadratics (the trace scores the model during "
              "the iterations, before the refinement).",
-             "", "| stop_fraction | min_iterations | median iterations | total iterations | "
+             "", "| stop_shift | min_iterations | median iterations | total iterations | "
              "mean F1 | mean bad-4.0 (%) | ended |", "|---|---|---|---|---|---|---|"]
     for f_scale, m_scale in RULE_VARIANTS:
-        change = dict(stop_fraction=params.stop_fraction * f_scale,
+        change = dict(stop_shift=params.stop_shift * f_scale,
                       min_iterations=max(1, int(params.min_iterations * m_scale)))
-        if not change["stop_fraction"] < 1:
-            continue                                    # not a valid Params.stop_fraction
         stops = [replay(r["trace"], params, **change) for r in records]
         its = [e["iteration"] for e, _ in stops]
-        text.append(f"| {change['stop_fraction']:.4g} | {change['min_iterations']} | "
+        text.append(f"| {change['stop_shift']:.4g} | {change['min_iterations']} | "
                     f"{np.median(its):.0f} | {sum(its)} | "
                     f"{np.mean([e['occ_f1'] for e, _ in stops]):.4f} | "
                     f"{np.mean([e['bad4'] for e, _ in stops]):.2f} | "

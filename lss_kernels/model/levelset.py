@@ -111,6 +111,7 @@ class LevelSet:
         self.median = MedianFilter(pool, self.H, self.W, params.median_size)
         self.flipped = pool.field(ti.i32, (), bucket=True)
         self.changed = pool.field(ti.i32, (), bucket=True)
+        self.boundary = pool.field(ti.i32, (), bucket=True)
         self.reference_sign = pool.field(ti.i8, (H, W), bucket=True)
         self.area = pool.field(ti.i32, (), bucket=True)
         self.curvature_clip = float(params.curvature_clip)
@@ -326,15 +327,24 @@ class LevelSet:
 
     @ti.kernel
     def net_change(self):
-        """Pixels whose label differs from the reference taken at the last call (the net
-        change over a window: an oscillating boundary does not count); renews the reference."""
+        """Pixels whose label differs from the reference taken at the last call (``changed``:
+        the net change over a window, an oscillating boundary does not count), and the
+        boundary's length (``boundary``: foreground pixels with a 4-neighbour of the
+        background inside the image); renews the reference."""
         self.changed[None] = 0
+        self.boundary[None] = 0
+        height, width = self.extent.height(), self.extent.width()
         for y, x in self.phi:
-            if y < self.extent.height() and x < self.extent.width():
+            if y < height and x < width:
                 now = ti.cast(self.phi[y, x] > 0, ti.i8)
                 if now != self.reference_sign[y, x]:
                     self.changed[None] += 1
                 self.reference_sign[y, x] = now
+                # a neighbour outside the image is clamped to the pixel itself (no boundary)
+                left, right = self.phi[y, ti.max(x - 1, 0)], self.phi[y, ti.min(x + 1, width - 1)]
+                up, down = self.phi[ti.max(y - 1, 0), x], self.phi[ti.min(y + 1, height - 1), x]
+                if now == 1 and ti.min(ti.min(left, right), ti.min(up, down)) <= 0:
+                    self.boundary[None] += 1
 
     def settle(self, shapes):
         """phi <- the median of phi_next, counting the sign flips (``flipped``) and the

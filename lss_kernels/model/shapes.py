@@ -68,6 +68,9 @@ class GlobalShapes:
         # x_n = x inv_s + x_shift, y_n = y inv_s + y_shift (see :meth:`load`)
         self.frame = field(ti.f32, (3,))
         self.theta = field(ti.f32, (2, NB))
+        # the shapes at the last call of moved() and how far they have moved since
+        self.reference = field(ti.f32, (2, NB))
+        self.change = field(ti.f32, ())
         self.updated = field(ti.i32, (2,))   # the last fit changed the shape
         self.fitted = field(ti.i32, (2,))    # the shape has been fitted at least once
         self.rows = field(ti.f32, (2,))
@@ -118,6 +121,24 @@ class GlobalShapes:
         t0, t1, t2 = self.theta[j, 0], self.theta[j, 1], self.theta[j, 2]
         t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
         return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
+
+    @ti.kernel
+    def moved(self, phi: ti.template()):
+        """How far the shapes have moved since the last call, in cyclopean pixels: ``change``
+        is the largest ``|Theta_j - reference_j|`` over the image, each pixel measured on its
+        own layer's shape (Theta_1 where ``phi > 0``, else Theta_2); then ``reference`` <-
+        Theta (the stopping rule's second test, :mod:`lss_kernels.stopping`)."""
+        self.change[None] = 0.0
+        for y, x in phi:
+            if y < self.extent.height() and x < self.extent.width():
+                j = 0 if phi[y, x] > 0 else 1
+                xn, yn = self.normalised(ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+                d = ti.Vector([self.theta[j, a] - self.reference[j, a]
+                               for a in ti.static(range(NB))])
+                dz = d[0] * xn * xn + d[1] * xn * yn + d[2] * yn * yn + d[3] * xn + d[4] * yn + d[5]
+                ti.atomic_max(self.change[None], ti.abs(dz))
+        for j, a in self.theta:
+            self.reference[j, a] = self.theta[j, a]
 
     @ti.func
     def huber_weight(self, j, x, y, d, k: ti.template()):
