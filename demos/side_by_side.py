@@ -93,7 +93,9 @@ def main(argv=None) -> int:
                         help="skip the unmeasured pass (the caches are already warm)")
     parser.add_argument("--out", help="write the table (markdown) here too")
     args = parser.parse_args(argv)
-    scenes = sorted(p for p in Path(args.dataset).iterdir() if (p / "meta.json").is_file())
+    # absolute: each process runs in its own output folder
+    scenes = sorted(p for p in Path(args.dataset).resolve().iterdir()
+                    if (p / "meta.json").is_file())
     if args.scenes:
         scenes = scenes[:args.scenes]
     if not scenes:
