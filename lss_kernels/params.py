@@ -58,9 +58,9 @@ class Params:
         ``stop_window`` iterations before are counted (an oscillating boundary does not
         count) and divided by the boundary's length in pixels: the boundary's mean shift
         over the window.  The window is quiet when that is below this many pixels.  The
-        same test for a small object as for a large one (0.2 % of the area, the rule's
-        earlier measure, asks a disc of radius 30 px to settle to 0.03 px, one of 300 px
-        to 0.3 px).  0 disables the rule (run to ``max_iterations``).
+        same test for a small object as for a large one (a fraction of the area, 0.2 %,
+        would ask a disc of radius 30 px to settle to 0.03 px, one of 300 px to 0.3 px).
+        0 disables the rule (run to ``max_iterations``).
     stop_surface : float
         A window is quiet only if, at each re-initialisation within it, neither layer's
         surface has moved by this many left-view pixels or more since the one before
@@ -69,11 +69,10 @@ class Params:
     stop_patience : int
         Stop after this many consecutive quiet windows.  Windows before ``min_iterations``
         count towards it: the rule can fire at ``min_iterations``.  One window of 20
-        iterations (0.1 px, 1 px) ends paper15 at a median of 140 iterations (180 with the
-        rule's earlier measure, two windows in which under 0.2 % of the foreground
-        changed) at the same F1; without the surface test it stopped an L whose model still
-        alternated between two backgrounds at F1 0.84 instead of 0.96 (``docs/design.md``,
-        the stopping rule).
+        iterations (0.1 px, 1 px) ends paper15 at a median of 140 iterations (two windows
+        in which under 0.2 % of the foreground changed: 180) at the same F1; without the
+        surface test it stopped an L whose surfaces still alternated at F1 0.84 instead of
+        0.96 (``docs/design.md``, the stopping rule).
     phi_scale : float
         phi is a signed distance (in pixels) times this factor (the release: 0.01).
     narrow_band : float

@@ -6,9 +6,9 @@ whose label differs from ``stop_window`` iterations before (the net change: a bo
 oscillates does not count) and divides them by the boundary's length in pixels, the mean
 distance the boundary has moved over the window (its *shift*); the window is quiet when that
 is below ``stop_shift`` pixels and neither layer's surface moved by ``stop_surface`` pixels
-or more between two re-initialisations within it (a model that still cycles between two
-backgrounds under a settled boundary).  It stops after ``stop_patience`` quiet windows in a
-row, not before ``min_iterations`` (see :class:`lss_kernels.Params`).
+or more between two re-initialisations within it (surfaces that still cycle under a settled
+boundary).  It stops after ``stop_patience`` quiet windows in a row, not before
+``min_iterations`` (see :class:`lss_kernels.Params`).
 
 :func:`replay` applies the rule, or a variant of it, to the per-window record of a finished
 run (``lss eval --trace``): how many iterations another rule would have taken, and at what
