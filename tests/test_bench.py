@@ -260,3 +260,31 @@ def test_kernel_profile_times_the_iterations_kernels(ti_arch):
     for name in ("_step", "_derivatives", "upward", "downward"):
         assert by_kernel[name]["launches"] == 1.0 and by_kernel[name]["ms"] > 0
     assert wall > 0 and sum(r["share"] for r in rows) == pytest.approx(1.0)
+
+
+def test_scene_times_against_a_base_alternates_the_sides_and_compares_again_seconds(tmp_path):
+    """``demos/scene_times.py --base``: each scene timed by both trees, the first side
+    alternating, each with its own cache; the table's ratio is base / head."""
+    st = _demo("scene_times")
+    calls = []
+
+    def fake_export(rev, into):
+        (into / "marker").write_text(rev)
+        return into
+
+    def fake_time(tree, folder, arch, cache):
+        side = "base" if (tree / "marker").exists() else "head"
+        calls.append((folder.name, side, cache.name))
+        again = {"base": 3.0, "head": 1.5}[side] * (2 if folder.name == "b" else 1)
+        return {"scene": folder.name, "again": again, "iterations": 100 if side == "base" else 40,
+                "f1": 0.8 if side == "base" else 0.9}
+    st.export, st.time_in_process = fake_export, fake_time
+    folders = [tmp_path / "a", tmp_path / "b"]
+    assert st.compare(folders, "abc123", "cpu", tmp_path / "t.md") == 0
+    assert calls == [("a", "base", "cache-base"), ("a", "head", "cache-head"),
+                     ("b", "head", "cache-head"), ("b", "base", "cache-base")]
+    lines = (tmp_path / "t.md").read_text().splitlines()
+    assert lines[0].startswith("Seconds per scene once the kernels are compiled (`again`), abc123")
+    assert lines[4] == "| a | 3.00 | 1.50 | 2.00 | 100 | 40 | 0.800 | 0.900 |"
+    assert lines[5] == "| b | 6.00 | 3.00 | 2.00 | 100 | 40 | 0.800 | 0.900 |"
+    assert lines[6] == "| **median** (F1: mean) | 4.50 | 2.25 | 2.00 | 100 | 40 | 0.800 | 0.900 |"
