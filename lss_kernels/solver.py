@@ -289,11 +289,10 @@ class Solver:
             raise RuntimeError("step: the solver has already stopped "
                                f"({self.stop_reason}); build a new Solver to run again")
         p = self.params
-        t_iter = time.perf_counter()
+        t = t_iter = time.perf_counter()
         self.iteration += 1
         first = self.iteration == 1
         ls, hier = self.levelset, self.hierarchy
-        t = t_iter
         ls.derivatives()
         self.occ.refresh_phi_plus(ls.phi)
         if not first:
@@ -344,10 +343,11 @@ class Solver:
         elif area == self.H * self.W:
             self.stop_reason = f"foreground filled the image at iteration {self.iteration}"
         elif self._rule.converged(self.iteration):
+            bound = f"< {p.stop_shift} and {p.stop_surface} px" if shift else "no label changed"
             self.stop_reason = (f"converged at iteration {self.iteration}: the boundary "
                                 f"shifted by {shift:.3f} px and the surfaces by "
                                 f"{self._surface:.2f} px over the last {p.stop_window} "
-                                f"iterations (< {p.stop_shift} and {p.stop_surface} px in "
+                                f"iterations ({bound} in "
                                 + ("its last window)" if self._rule.quiet == 1 else
                                    f"{self._rule.quiet} windows in a row)"))
         elif self.iteration >= p.max_iterations:

@@ -7,7 +7,8 @@ oscillates does not count) and divides them by the boundary's length in pixels, 
 distance the boundary has moved over the window (its *shift*); the window is quiet when that
 is below ``stop_shift`` pixels and neither layer's surface moved by ``stop_surface`` pixels
 or more between two re-initialisations within it (surfaces that still cycle under a settled
-boundary).  It stops after ``stop_patience`` quiet windows in a row, not before
+boundary), unless no pixel changed its label at all (surfaces that cycle under a boundary that
+stands still cannot move it).  It stops after ``stop_patience`` quiet windows in a row, not before
 ``min_iterations`` (see :class:`lss_kernels.Params`).
 
 :func:`replay` applies the rule, or a variant of it, to the per-window record of a finished
@@ -43,7 +44,9 @@ class StopRule:
         """The window that just ended: the boundary's mean shift over it (changed pixels over
         boundary pixels) and the largest move of a layer's surface between two
         re-initialisations within it (left-view pixels; 0 when none fell within it)."""
-        settled = self.surface <= 0 or surface_change < self.surface
+        # a boundary that did not move at all is settled whatever its surfaces do: surfaces
+        # that cycle under it will not move it (a limit cycle, waited for to the cap)
+        settled = self.surface <= 0 or surface_change < self.surface or boundary_shift == 0
         self.quiet = self.quiet + 1 if boundary_shift < self.shift and settled else 0
 
     def converged(self, iteration: int) -> bool:

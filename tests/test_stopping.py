@@ -52,6 +52,15 @@ def test_a_window_whose_surfaces_moved_is_not_quiet():
     assert replay(windows, P, stop_surface=2.5) == (windows[2], True)
 
 
+def test_surfaces_that_cycle_under_a_boundary_that_stands_still_do_not_hold_the_rule():
+    """No pixel changed its label (shift 0): the surfaces' cycle cannot move the boundary,
+    so the window is quiet whatever they do; a boundary that moves at all keeps the test."""
+    windows = _windows([0.001, 0.0, 0.0, 0.001, 0.0], surfaces=[2.0, 2.04, 2.04, 2.04, 2.04])
+    assert replay(windows, P) == (windows[2], True)      # quiet: windows 1, 2 (at 30)
+    moving = _windows([0.001] * 5, surfaces=[2.04] * 5)
+    assert replay(moving, P) == (moving[4], False)       # never quiet: the record ends
+
+
 def test_replay_variants_and_the_end_of_the_record():
     windows = _windows([0.5, 0.02, 0.02, 0.005, 0.005, 0.002])
     assert replay(windows, P) == (windows[4], True)                     # 0.01: windows 4, 5
