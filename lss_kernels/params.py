@@ -65,9 +65,9 @@ class Params:
         A window is quiet only if, at each re-initialisation within it, neither layer's
         surface has moved by this many left-view pixels or more since the one before
         (measured on the layer's own pixels): a model still cycling under a settled
-        boundary is not converged, unless no pixel changed its label over the window (a
-        stationary cycle: a random scene's surfaces alternated by 2.04 px to the 1500 cap
-        under a boundary that stood still from iteration 100).  0 leaves this test out.
+        boundary is not converged, unless no pixel changed its label over the window
+        (surfaces cycling under a boundary that stands still: no wait ends such a cycle).
+        0 leaves this test out.
     stop_patience : int
         Stop after this many consecutive quiet windows.  Windows before ``min_iterations``
         count towards it: the rule can fire at ``min_iterations``.  One window of 20

@@ -7,9 +7,9 @@ oscillates does not count) and divides them by the boundary's length in pixels, 
 distance the boundary has moved over the window (its *shift*); the window is quiet when that
 is below ``stop_shift`` pixels and neither layer's surface moved by ``stop_surface`` pixels
 or more between two re-initialisations within it (surfaces that still cycle under a settled
-boundary), unless no pixel changed its label at all (surfaces that cycle under a boundary that
-stands still cannot move it).  It stops after ``stop_patience`` quiet windows in a row, not before
-``min_iterations`` (see :class:`lss_kernels.Params`).
+boundary), unless no pixel changed its label at all (surfaces that cycle under a boundary
+that stands still cannot move it).  It stops after ``stop_patience`` quiet windows in a row,
+not before ``min_iterations`` (see :class:`lss_kernels.Params`).
 
 :func:`replay` applies the rule, or a variant of it, to the per-window record of a finished
 run (``lss eval --trace``): how many iterations another rule would have taken, and at what
@@ -68,9 +68,9 @@ def replay(windows, params, **changes):
     Parameters
     ----------
     windows : sequence of dict
-        The run's record at the end of each stop window, in order: ``iteration`` and
-        ``boundary_shift`` and ``surface_change`` (any other keys are passed through), plus possibly a last entry
-        at the run's final iteration.
+        The run's record at the end of each stop window, in order: ``iteration``,
+        ``boundary_shift`` and ``surface_change`` (any other keys are passed through), plus
+        possibly a last entry at the run's final iteration.
     params : lss_kernels.Params
         The parameters of the recorded run (its ``stop_window`` must be the one recorded).
 
