@@ -95,8 +95,7 @@ class Solver:
         self.params = params if params is not None else Params()
         if not isinstance(self.params, Params):
             raise TypeError(f"params: expected lss_kernels.Params, got {type(params).__name__}")
-        left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
-                                                self.params)
+        left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame, self.params)
         self.H, self.W = left.shape[:2]
         self.profile = profile
         self.pool, self._grids = None, {}
@@ -343,7 +342,8 @@ class Solver:
         elif area == self.H * self.W:
             self.stop_reason = f"foreground filled the image at iteration {self.iteration}"
         elif self._rule.converged(self.iteration):
-            bound = f"< {p.stop_shift} and {p.stop_surface} px" if shift else "no label changed"
+            bound = ("no label changed" if shift == 0 and self._surface >= p.stop_surface
+                     else f"< {p.stop_shift} and {p.stop_surface} px")
             self.stop_reason = (f"converged at iteration {self.iteration}: the boundary "
                                 f"shifted by {shift:.3f} px and the surfaces by "
                                 f"{self._surface:.2f} px over the last {p.stop_window} "
