@@ -132,6 +132,11 @@ class Params:
         box (left-view pixels).
     refine_ratio : float
         Peak-ratio threshold of a distinct match in the refinement (in (0, 1]).
+    refine_support : float
+        Fraction of a residual box's layer pixels that must hold a distinct match for its
+        average residual to count fully; below it the residual shrinks in proportion, so a
+        textureless layer, whose few distinct matches are noise, keeps its quadratic (in
+        [0, 1]; 0: any match counts fully).
     strip_window : (int, int)
         ``(near, far)``: after the refinement every occluded strip of the output is measured
         again, as the jump from the foreground at its edge to the background where the right
@@ -203,6 +208,7 @@ class Params:
     refine: bool = True
     refine_passes: tuple = ((24, 7, 8), (4, 4, 2))
     refine_ratio: float = 0.9
+    refine_support: float = 0.03
     strip_window: tuple = (6, 20)
     message_ambiguity: float = 0.0
     recover: bool = True
@@ -277,6 +283,7 @@ class Params:
             for p in v), "a tuple of (range, window, smoothing) triples of integers in "
             "[1, 64]")
         need("refine_ratio", lambda v: finite(v) and 0 < v <= 1, "a number in (0, 1]")
+        need("refine_support", lambda v: finite(v) and 0 <= v <= 1, "a number in [0, 1]")
         need("strip_window", lambda v: v == (0, 0) or (
             isinstance(v, tuple) and len(v) == 2
             and all(isinstance(k, int) and not isinstance(k, bool) for k in v)

@@ -139,9 +139,9 @@ class Solver:
         self.initialiser = InitialRegion(pool, H, W)
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, self.params)
-        self.refinement = (LayerRefinement(pool.annex(), H, W, self.params.refine_passes,
-                                           self.params.refine_ratio)
-                           if self.params.refine else None)
+        p = self.params
+        self.refinement = (LayerRefinement(pool.annex(), H, W, p.refine_passes, p.refine_ratio,
+                                           p.refine_support) if p.refine else None)
         pool.finalize()
         self.levelset.setup()
         self.costs.setup(self.levelset.distance, self.levelset.distance_map)

@@ -204,6 +204,7 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None):
                        refinement=dict(enabled=params.refine,
                                        passes=[list(p) for p in params.refine_passes],
                                        ratio=params.refine_ratio,
+                                       support=params.refine_support,
                                        seconds=round(result.timings.get("refine", 0.0), 4)),
                        background_sweep=sweep_summary(result.history),
                        params=params.to_dict())

@@ -19,7 +19,10 @@ the quadratics):
    one camera only) and candidates whose right pixel leaves the image are no evidence;
 3. the residual of the matches, ``match - S``, is averaged over a box of ``smoothing``
    pixels (plus a twentieth of a box four times wider, which fills larger holes) restricted
-   to the layer, and added to S.
+   to the layer, and added to S.  Where fewer than a fraction ``support`` of the box's layer
+   pixels hold a match, the average is shrunk towards 0 in proportion (as if the missing
+   matches said "no residual"): a textureless or dark region passes the peak-ratio test only
+   on a few noise matches, whose average would otherwise replace a correct surface.
 
 The result of a pass is the surface of the next: a wide first pass follows a layer far from
 its quadratic, a narrow second one settles the detail.  Box sums run as prefix sums along
@@ -51,6 +54,9 @@ class LayerRefinement:
         layer-restricted matching window and of the residual's box, per pass.
     ratio : float
         Peak-ratio threshold of a distinct match (in (0, 1]).
+    support : float
+        Fraction of a box's layer pixels that must hold a distinct match for the box's
+        average residual to count fully (in [0, 1]; 0: any match counts fully).
 
     After :meth:`run`, ``surface`` holds the refined map and ``weight`` 1 on the pixels
     whose last pass kept a distinct match of their own (the others took their layer's
@@ -59,11 +65,12 @@ class LayerRefinement:
     :class:`~lss_kernels.kernels.backend.Extent`: they compile once per bucket.
     """
 
-    def __init__(self, pool, height, width, passes, ratio):
+    def __init__(self, pool, height, width, passes, ratio, support):
         self.H, self.W = int(height), int(width)
         self.extent = pool.extent(self.H, self.W)
         self.passes = tuple(tuple(int(v) for v in p) for p in passes)
         self.ratio = float(ratio)
+        self.support = float(support)
         self.K = 2 * max(p[0] for p in self.passes) + 1
         shape = self.extent.bucket
         field = lambda dtype, shape: pool.field(dtype, shape, bucket=True)
@@ -85,6 +92,7 @@ class LayerRefinement:
         self.columns = vector()
         self.box = vector()
         self.average = vector()
+        self.count = vector()        # the same boxes' layer pixels (fg, bg, -, -)
 
     @ti.func
     def _pixels(self):
@@ -240,6 +248,18 @@ class LayerRefinement:
                                            ti.select(fg, w, 0.0), ti.select(fg, 0.0, w)])
 
     @ti.kernel
+    def _layer_source(self):
+        for y, x in ti.ndrange(*self._pixels()):
+            fg = self.label[y, x] == 0
+            self.source[y, x] = ti.Vector([ti.select(fg, 1.0, 0.0), ti.select(fg, 0.0, 1.0),
+                                           0.0, 0.0])
+
+    @ti.kernel
+    def _keep_count(self):
+        for y, x in ti.ndrange(*self._pixels()):
+            self.count[y, x] = self.average[y, x]
+
+    @ti.kernel
     def _accumulate(self, weight: ti.f32):
         """``average = box`` for weight 1, ``average += weight * box`` otherwise."""
         for y, x in ti.ndrange(*self._pixels()):
@@ -247,23 +267,31 @@ class LayerRefinement:
                 ti.select(weight < 1.0, self.average[y, x], 0.0)
 
     @ti.kernel
-    def _apply(self, d_max: ti.f32):
+    def _apply(self, d_max: ti.f32, support: ti.f32):
         for y, x in ti.ndrange(*self._pixels()):
             lab = self.label[y, x]
-            den = self.average[y, x][2 + lab]
+            den = ti.max(self.average[y, x][2 + lab], support * self.count[y, x][lab])
             s = self.surface[y, x]
             if den > 0:
                 s += self.average[y, x][lab] / den
             self.surface[y, x] = ti.min(ti.max(s, 0.0), d_max)
 
-    def _smooth(self, r):
-        """``average``: the layer-restricted box sums of the weighted residual and of the
-        weights, over the ``r`` box plus ``WIDE_WEIGHT`` times the ``4 r`` box."""
-        self._residual_source()
+    def _boxes(self, r):
+        """``average``: the box sums of ``source`` over the ``r`` box plus ``WIDE_WEIGHT``
+        times the ``4 r`` box."""
         self.box_sum(r)
         self._accumulate(1.0)
         self.box_sum(4 * r)
         self._accumulate(WIDE_WEIGHT)
+
+    def _smooth(self, r):
+        """``count``: the layer pixels of each pixel's boxes; ``average``: the
+        layer-restricted box sums of the weighted residual and of the weights."""
+        self._layer_source()
+        self._boxes(r)
+        self._keep_count()
+        self._residual_source()
+        self._boxes(r)
 
     def run(self, left, right, surface, foreground, occlusion, d_max):
         """Refine the left-view ``surface`` (f32 plane; clamped to ``[0, d_max]`` first) of
@@ -282,4 +310,4 @@ class LayerRefinement:
                 self._store(d, R, window)
             self._select(R, self.ratio)
             self._smooth(smoothing)
-            self._apply(float(d_max))
+            self._apply(float(d_max), self.support)

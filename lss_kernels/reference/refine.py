@@ -29,12 +29,13 @@ def left_cost(left, right, d, censuses):
 
 
 def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ratio,
-                  wide_weight=0.05):
+                  support=0.0, wide_weight=0.05):
     """Surface plus parallax (:mod:`lss_kernels.model.refine`): per pass ``(R, window,
     smoothing)``, the layer-restricted window mean of the AD-Census cost for the candidates
     ``round(S) - R .. round(S) + R``, the distinct interior best (peak ratio) refined by a
-    parabola, the layer-restricted average of its residual, added to S and clamped.  S
-    starts clamped to ``[0, d_max]`` (non-finite: 0)."""
+    parabola, the layer-restricted average of its residual (its denominator at least
+    ``support`` times the boxes' layer pixels), added to S and clamped.  S starts clamped
+    to ``[0, d_max]`` (non-finite: 0)."""
     H, W = surface.shape
     S = np.asarray(surface, np.float64)
     S = np.clip(np.where(np.isfinite(S), S, 0.0), 0.0, d_max)
@@ -69,11 +70,11 @@ def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ra
             sub = np.where(ok & (den > 0), 0.5 * (cm - cp) / den, 0.0)
         residual = np.where(ok, base + kb - R + sub - S, 0.0)
         weight = ok.astype(float)
+        boxes = lambda a: (box_sum(a, 2 * smoothing + 1)
+                           + wide_weight * box_sum(a, 8 * smoothing + 1))
         for lab in layers:
-            num = (box_sum(weight * residual * lab, 2 * smoothing + 1)
-                   + wide_weight * box_sum(weight * residual * lab, 8 * smoothing + 1))
-            den = (box_sum(weight * lab, 2 * smoothing + 1)
-                   + wide_weight * box_sum(weight * lab, 8 * smoothing + 1))
+            num = boxes(weight * residual * lab)
+            den = np.maximum(boxes(weight * lab), support * boxes(lab.astype(float)))
             S = np.where(lab & (den > 0), S + num / np.where(den > 0, den, 1.0), S)
         S = np.clip(S, 0.0, d_max)
     return S
