@@ -175,6 +175,11 @@ class Params:
         Search a pair from 0 px when its first consensus puts at least 15 % of its confident
         pixels below 4 px (a far background), else from 2 px as the authors' grid does
         (:mod:`lss_kernels.model.offset`).  Any other pair is solved exactly as without it.
+    front_margin : float
+        A third layer in front of the object (:mod:`lss_kernels.model.front`): pixels whose
+        first consensus stands more than this many left-view pixels in front of Theta_1, and
+        the strips they hide, leave both fits and the Eq. 2 data term.  0: the paper's two
+        layers (a whole photo's solve, :mod:`lss_kernels.photo`, turns it on).
     """
 
     dt: float = 0.2
@@ -216,6 +221,7 @@ class Params:
     zero_floor: bool = True
     background_sweep: float = 0.05
     refine_ellipse: bool = True
+    front_margin: float = 0.0
 
     def __post_init__(self):
         self.validate()
@@ -296,6 +302,7 @@ class Params:
         if not isinstance(self.photometric, bool):
             raise ValueError(f"params.photometric: expected True or False, got "
                              f"{self.photometric!r}")
+        need("front_margin", nonneg, "a finite number of pixels >= 0 (0: two layers)")
 
     def replace(self, **changes) -> "Params":
         """A copy with some fields changed (validated)."""

@@ -26,6 +26,10 @@ class Result:
     was solved again (:mod:`lss_kernels.recovery`; set by :func:`solve`, not by ``run``);
     ``photometry``: the right view's photometric correction (:mod:`lss_kernels.photometry`);
     ``search``: where the disparity grid started, 2 or 0 px (:mod:`lss_kernels.model.offset`).
+    ``layers``: uint8 ``(H, W)``, left view: 0 background, 1 the object (``foreground``), 2 in
+    front of it (:mod:`lss_kernels.model.layers`; only with ``Params.front_margin``).
+    ``window``: ``(x0, y0, x1, y1)``, the part of a whole photo that was solved
+    (:mod:`lss_kernels.photo`; None: the whole pair).
     """
 
     disparity: np.ndarray
@@ -44,3 +48,5 @@ class Result:
     recovery: dict = field(default_factory=dict)
     photometry: dict = field(default_factory=dict)
     search: dict = field(default_factory=dict)
+    layers: np.ndarray | None = None
+    window: tuple | None = None

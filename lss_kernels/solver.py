@@ -27,8 +27,10 @@ from .kernels import backend
 from .kernels.backend import FieldPool
 from .model import STAGES
 from .model.costs import BoundaryCosts
+from .model.front import FrontLayer
 from .model.hierarchy import PatchHierarchy
 from .model.init import InitialRegion
+from .model.layers import FRONT, front_in_left_view, occlusion_by_layers
 from .model.levelset import LevelSet
 from .model.matching import MatchingCost
 from .model.messages import Messages
@@ -45,9 +47,13 @@ from .stopping import StopRule
 
 __all__ = ["Result", "Solver", "solve"]
 
+#: Widest layer in front of the object that a point's start is carried across (a rod, a
+#: handle), cyclopean pixels (:meth:`lss_kernels.model.init.InitialRegion.bridge`).
+BRIDGE_GAP = 16
+
 #: What a solver holds per disparity grid (:meth:`Solver._use`).
 _GRID = ("c_max", "pool", "extent", "left", "right", "matching", "hierarchy", "messages",
-         "costs", "shapes", "sweep", "initialiser", "occ", "levelset", "refinement")
+         "costs", "shapes", "sweep", "initialiser", "occ", "levelset", "refinement", "front")
 
 
 @ti.data_oriented
@@ -140,6 +146,10 @@ class Solver:
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, self.params)
         p = self.params
+        self.front = FrontLayer(pool, H, W) if p.front_margin > 0 else None
+        if self.front is not None:
+            self.levelset.hidden = self.front.hidden
+            self.initialiser.bridge_gap = BRIDGE_GAP
         self.refinement = (LayerRefinement(pool.annex(), H, W, p.refine_passes, p.refine_ratio,
                                            p.refine_support) if p.refine else None)
         pool.finalize()
@@ -185,6 +195,8 @@ class Solver:
             self._use(self.c_release + 1)
             self._load_pair(left, right, SHIFT)
             self._first_consensus()
+        if self.front is not None:
+            self.front.capture(self.hierarchy.matching_cost, self.c_max)
         self.costs.build(self.hierarchy.matching_cost, self.left, self.right, self.params)
         self.sweep.standardise(self.hierarchy.matching_cost)
         ti.sync()
@@ -271,6 +283,10 @@ class Solver:
             w_bg = w * self.shapes.huber_weight(1, x, y, c, k)
             if ti.static(self.params.exclusive_fit):
                 w_bg *= self.shapes.closer_to(1, x, y, c)
+        if ti.static(self.params.front_margin > 0):
+            if self.front.hidden[y, x] == 1:     # no evidence for either layer
+                w_fg = 0.0
+                w_bg = 0.0
         return ti.Vector([w_fg, w_bg])
 
     # ------------------------------------------------------------------ the iteration
@@ -307,6 +323,9 @@ class Solver:
             self.shapes.fit(self, hier.consensus_mean)
         plane = self.sweep.run(self.iteration, p, hier.matching_cost, self.shapes, ls.phi,
                                self.occ.phi_plus, hier.consensus_mean)
+        if self.front is not None:
+            self.front.update(hier.matching_cost, self.c_max, self.shapes,
+                              0.5 * p.front_margin)
         t = self._stage("shapes", t)
         self.occ.compute(self.shapes, ls.phi_x, 1)
         t = self._stage("occlusion", t)
@@ -432,9 +451,28 @@ class Solver:
                     d_p=2.0 * lev.d_p[y, x] - self.offset, sigma_p=2.0 * lev.sigma_p[y, x],
                     valid=bool(lev.valid[y, x]), mean_D=2.0 * d_mean - self.offset)
 
+    def _front_view(self, surface, occlusion, foreground, disparity):
+        """The left-view outputs with the layer in front of the object
+        (:mod:`lss_kernels.model.front`) drawn over them, and the layer map: front pixels take
+        the first consensus's disparity, leave the object, and hide from the right camera the
+        pixels of the layers behind them (:func:`~lss_kernels.model.layers.occlusion_by_layers`)."""
+        layers = foreground.astype(np.uint8)
+        if self.front is None:
+            return surface, occlusion, foreground, disparity, layers
+        mask, d_front = front_in_left_view(self.extent.image(self.front.front) > 0,
+                                           self.extent.image(self.front.first))
+        mask = to_user_left(mask, self.shift)
+        d_front = np.clip(to_user_left(d_front, self.shift) - self.offset, 0.0, self.d_max)
+        surface = np.where(mask, d_front, surface).astype(np.float32)
+        disparity = np.where(mask, d_front, disparity).astype(np.float32)
+        layers[mask] = FRONT
+        hidden = occlusion_by_layers(disparity, layers, occluders=mask)
+        return (surface, (occlusion & ~mask) | hidden, foreground & ~mask, disparity, layers)
+
     def result(self):
         """The current model as a :class:`Result`."""
-        surface, occlusion, foreground, disparity = self.left_view(refine=True)
+        surface, occlusion, foreground, disparity, layers = self._front_view(
+            *self.left_view(refine=True))
         mean, sigma = self.consensus()
         th = self.shapes.pixel_coefficients(2.0)
         th[:, 5] -= self.offset
@@ -448,7 +486,7 @@ class Solver:
                       consensus_mean=mean, consensus_sigma=sigma, iterations=self.iteration,
                       stop_reason=self.stop_reason or "not finished", timings=timings,
                       history=list(self.history), photometry=dict(self.photometry),
-                      search=dict(self.search))
+                      search=dict(self.search), layers=layers)
 
     def _all_grids(self):
         """Every grid the solver holds (``_GRID`` names to objects), the current one first."""

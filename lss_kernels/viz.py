@@ -23,6 +23,7 @@ from matplotlib.figure import Figure
 __all__ = [
     "OCCLUSION_RGB", "BOUNDARY_RGB", "INIT_BOUNDARY_RGB",
     "colorize", "boundary_mask", "thicken", "paint_mask", "draw_boundary",
+    "LAYER_RGB", "layers_rgb", "save_layers_png",
     "occlusion_disparity_rgb", "overlay_rgb", "save_disparity_png", "save_overlay_png",
     "save_rgb_png", "new_figure", "render_figure", "save_figure",
 ]
@@ -210,6 +211,32 @@ def overlay_rgb(left, foreground=None, occlusion=None, init_foreground=None,
         rgb = draw_boundary(rgb, _as_mask(foreground, (h, w), "foreground"),
                             BOUNDARY_RGB, thickness)
     return _to_uint8(rgb)
+
+
+#: The tint of each layer of a layer map (lss_kernels.model.layers): behind the object grey,
+#: the object red, in front of it blue; any other value (outside a photo's window) black.
+LAYER_RGB = {0: (0.55, 0.55, 0.55), 1: (0.9, 0.15, 0.1), 2: (0.1, 0.35, 0.95)}
+
+
+def layers_rgb(left, layers) -> np.ndarray:
+    """The left image tinted by layer (:data:`LAYER_RGB`, 50 % opacity; other values
+    black), each layer's boundary drawn in its own colour."""
+    rgb = _as_rgb(left, "left")
+    layers = np.asarray(layers)
+    if layers.shape != rgb.shape[:2]:
+        raise ValueError(f"layers: expected shape {rgb.shape[:2]}, got {layers.shape}")
+    known = np.isin(layers, list(LAYER_RGB))
+    rgb = np.where(known[..., None], rgb, 0.0)
+    for value, colour in LAYER_RGB.items():
+        rgb = paint_mask(rgb, layers == value, colour, 0.5)
+        if value:
+            rgb = draw_boundary(rgb, layers == value, colour, 1)
+    return _to_uint8(rgb)
+
+
+def save_layers_png(path, left, layers) -> str:
+    """Save :func:`layers_rgb` as a PNG of the input's size."""
+    return save_rgb_png(path, layers_rgb(left, layers))
 
 
 def _makedirs_for(path) -> None:

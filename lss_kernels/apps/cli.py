@@ -64,6 +64,9 @@ def _add_solve(subparsers):
     p.add_argument("--no-refine", action="store_true",
                    help="disparity.pfm keeps the two quadratics (the paper's model) instead "
                         "of refining each layer by its own matches")
+    p.add_argument("--photo", action="store_true",
+                   help="a whole photo: solve the object under --init in a window around it, "
+                        "with a third layer for what stands in front of it (layers.png)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=main_solve)
 
@@ -173,7 +176,10 @@ def main_solve(args):
     backend.init(arch=args.arch, threads=args.threads)
     has_truth = scene is not None and scene.disp_left is not None and scene.occ_left is not None
     name = scene.name if scene is not None else os.path.basename(os.path.abspath(args.out))
-    job = Job(name, left, right, d_max, init, init_frame, scene if has_truth else None)
+    if args.photo and init_frame == "cyclopean":    # a scene's ellipse, in the left view
+        init, init_frame = tuple(scene.init_ellipse), "left"
+    job = Job(name, left, right, d_max, init, init_frame, scene if has_truth else None,
+              photo=args.photo)
     progress = Progress(params.max_iterations, args.quiet)
     try:
         summary = run_job(job, args.out, params, callback=progress)

@@ -18,7 +18,8 @@ resumed) unless ``force`` is set.  ``results.csv``, ``table.md`` and the panels 
 methods of the latest call (a panel is redrawn when one of its runs was recomputed or it is
 missing).  Methods: ``lss`` (this package's solver, initialised with the
 scene's cyclopean ellipse when it has one, the authors' own initialisation, else its left-view
-ellipse) and the OpenCV peers of :mod:`lss_kernels.apps.baselines` (``sgm``, ``bm-lr``).
+ellipse), ``lss-photo`` (the scene as a whole photo, :mod:`lss_kernels.photo`, from the same
+start in the left view) and the OpenCV peers of :mod:`lss_kernels.apps.baselines` (``sgm``, ``bm-lr``).
 """
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ from .reports import COLUMNS
 __all__ = ["COLUMNS", "METHOD_NAMES", "add_cli", "main_eval", "run_eval"]
 
 #: Every method ``run_eval`` knows, in table order.
-METHOD_NAMES = ("lss",) + tuple(BASELINES)
+METHOD_NAMES = ("lss", "lss-photo") + tuple(BASELINES)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -51,7 +52,7 @@ METHOD_NAMES = ("lss",) + tuple(BASELINES)
 def _init_worker(arch: str, threads: int | None, methods) -> None:
     """Per-process set-up: Taichi for the solver, OpenCV's thread count for the peers (a
     no-op when done before with the same settings)."""
-    if "lss" in methods:
+    if any(m.startswith("lss") for m in methods):
         from ..kernels import backend
         backend.init(arch=arch, threads=threads)
     if any(m in BASELINES for m in methods):
@@ -175,8 +176,30 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
         if trace:
             extra["trace"] = rows
         return result.disparity, result.occlusion, extra, spent
+    if method == "lss-photo":
+        return _run_photo(scene, params, init)
     disparity, occlusion = BASELINES[method](scene.left, scene.right, scene.d_max)
     return disparity, occlusion, {}, 0.0
+
+
+def _run_photo(scene: io.Scene, params, init=None):
+    """``lss-photo``: the scene as a whole photo (:func:`lss_kernels.photo.solve_photo`)
+    from its start in the left view."""
+    from ..photo import solve_photo
+    from ..recovery import named_warnings
+    _release_solver()
+    start, frame = scene_start(scene, init)
+    if frame == "cyclopean":
+        start = tuple(scene.init_ellipse)
+    with named_warnings(scene.name):
+        result = solve_photo(scene.left, scene.right, scene.d_max, start, params)
+    windows = result.recovery.get("windows", [])
+    extra = {"iterations": int(result.iterations), "stop_reason": str(result.stop_reason),
+             "recovered": result.recovery.get("kept") == "retry", "windows": len(windows),
+             "window": list(result.window),
+             "bad4_surface": float(metrics.score(result.surface, result.occlusion,
+                                                 scene)["bad4"])}
+    return result.disparity, result.occlusion, extra, 0.0
 
 
 def _run_one(scene_dir: str, method: str, run_dir: str, params, trace: bool = False,
@@ -341,7 +364,7 @@ def _execute(todo, methods, arch: str):
     """Yield the records of the runs in ``todo``, run one after the other in this process."""
     if not todo:
         return
-    if "lss" in methods:
+    if any(m.startswith("lss") for m in methods):
         from ..kernels import backend
         if backend.current_arch() != arch:
             backend.init(arch=arch)
@@ -359,7 +382,7 @@ def _execute_on_dask(todo, methods, jobs: int, arch: str, scheduler: str | None)
         return
     from distributed import as_completed
     from .batch import cluster_arch, dask_client, worker_threads
-    if "lss" in methods:
+    if any(m.startswith("lss") for m in methods):
         arch = cluster_arch(arch, scheduler)
     with dask_client(jobs, scheduler, what=f"--jobs {jobs}") as client:
         threads = worker_threads(client)

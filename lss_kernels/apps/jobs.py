@@ -49,6 +49,9 @@ class Job:
     init_frame : {"left", "cyclopean"}
     scene : lss_kernels.io.Scene or None
         The scene with its ground truth, to score the result (None: no score).
+    photo : bool
+        A whole photo: the object solved in a window around the start, with a layer for
+        what stands in front of it (:mod:`lss_kernels.photo`; ``init`` in the left view).
     """
 
     name: str
@@ -58,6 +61,7 @@ class Job:
     init: Any
     init_frame: str = "left"
     scene: Any = None
+    photo: bool = False
 
 
 def scene_init(scene, init=None):
@@ -94,16 +98,34 @@ class SolverCache:
         self.key, self.solver = None, None
 
     def solve(self, job, params, callback=None):
-        """Solve ``job`` (solved again when the model collapses, :mod:`lss_kernels.recovery`);
-        returns ``(result, facts)``: the left image, the initial foreground (left view) and
-        the initialisation's report of the run kept."""
+        """Solve ``job`` (solved again when the model collapses, :mod:`lss_kernels.recovery`;
+        in windows of a whole photo, :mod:`lss_kernels.photo`, for ``job.photo``); returns
+        ``(result, facts)``: the left image, the initial foreground (left view) and the
+        initialisation's report of the run kept."""
         from ..recovery import with_recovery
+        if job.photo:
+            return self._solve_photo(job, params, callback)
 
         def run(p):
             result, solver = self._run(job, p, callback)
             return result, (solver.left_image, solver.initial_left,
                             solver.init_info)
         return with_recovery(run, params, job.d_max, job.left, job.right)
+
+    def _solve_photo(self, job, params, callback):
+        from dataclasses import replace
+        from ..photo import photo_params, solve_in_windows
+        from ..validate import check_inputs
+        if job.init_frame != "left":
+            raise ValueError("init: a whole photo's start is given in the left view")
+        params = photo_params(params)
+        left, right, d_max, init = check_inputs(job.left, job.right, job.d_max, job.init,
+                                                "left", params)
+
+        def run(l, r, start):
+            return self.solve(replace(job, left=l, right=r, init=start, photo=False), params,
+                              callback)
+        return solve_in_windows(run, left, right, d_max, init)
 
     def _run(self, job, params, callback=None):
         """Solve ``job`` with a reused or new solver; returns ``(result, solver)``."""
@@ -176,6 +198,23 @@ def sweep_summary(history):
     return dict(planes_set=len(planes), last=last)
 
 
+def layer_summary(result):
+    """What each value of ``layers.png`` is, with its surface, and the window solved."""
+    from ..model.layers import BACKGROUND, FRONT, OBJECT
+    from ..photo import OUTSIDE
+    layers = {str(BACKGROUND): "behind the object: theta_bg",
+              str(OBJECT): "the object (foreground.png): theta_fg"}
+    if result.layers is not None and (result.layers == FRONT).any():
+        layers[str(FRONT)] = ("in front of the object: its own matches (disparity.pfm), "
+                              "no surface model")
+    if result.window is not None:
+        layers[str(OUTSIDE)] = "outside the window solved"
+    return dict(values=layers, pixels={str(k): int(v) for k, v in zip(
+        *np.unique(result.layers if result.layers is not None else
+                   result.foreground.astype(np.uint8), return_counts=True))},
+        window=None if result.window is None else list(result.window))
+
+
 def write_outputs(out_dir, result, left, params, extra=None, initial=None):
     """Write the result files into ``out_dir`` atomically (a temporary sibling folder, then
     renamed into place); returns the summary.  ``initial``: the initial foreground (left
@@ -190,6 +229,10 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None):
         io.write_pfm(os.path.join(tmp, "surface.pfm"), result.surface)
         io.write_mask(os.path.join(tmp, "occlusion.png"), result.occlusion)
         io.write_mask(os.path.join(tmp, "foreground.png"), result.foreground)
+        layers = (result.layers if result.layers is not None
+                  else result.foreground.astype(np.uint8))
+        io.write_png(os.path.join(tmp, "layers.png"), layers.astype(np.uint8))
+        viz.save_layers_png(os.path.join(tmp, "layers_overlay.png"), left, layers)
         viz.save_disparity_png(os.path.join(tmp, "disparity.png"), result.disparity,
                                vmin=0.0, occlusion=result.occlusion)
         viz.save_overlay_png(os.path.join(tmp, "overlay.png"), left, result.foreground,
@@ -207,6 +250,7 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None):
                                        support=params.refine_support,
                                        seconds=round(result.timings.get("refine", 0.0), 4)),
                        background_sweep=sweep_summary(result.history),
+                       layers=layer_summary(result),
                        params=params.to_dict())
         summary.update(extra or {})
         with open(os.path.join(tmp, "summary.json"), "w") as f:

@@ -196,6 +196,9 @@ class InitialRegion:
         self.changed = pool.field(ti.i32, ())
         self.median = MedianFilter(pool, H, W, MEDIAN)
         self.info, self.grown = {}, None
+        #: widest layer in front of the object that a point's region is carried across
+        #: (:meth:`bridge`), cyclopean pixels; 0: none (the paper's two layers)
+        self.bridge_gap = 0
 
     @ti.kernel
     def load(self, mean: ti.template(), precision: ti.template()):
@@ -291,6 +294,34 @@ class InitialRegion:
                         if self.label[v, u] == 1 and ti.abs(self.d[v, u] - d) <= step:
                             self.label[y, x] = 1
                             self.changed[None] = 1
+
+    @ti.kernel
+    def bridge(self, seed_d: ti.f32, tolerance: ti.f32, max_gap: ti.i32):
+        """Carry the region across a thin layer in front of it: from a region pixel, along
+        its row and its column, over at most ``max_gap`` pixels whose d-bar stands more than
+        ``tolerance`` in front of the seed's, to a pixel within ``tolerance`` of the seed's,
+        which joins the region with the pixels crossed."""
+        for y, x in self.label:
+            if self.label[y, x] == 1:
+                for k in ti.static(range(4)):
+                    dy, dx = ti.static(((0, 1), (0, -1), (1, 0), (-1, 0))[k])
+                    far = 0
+                    for step in range(1, max_gap + 2):
+                        v, u = y + step * dy, x + step * dx
+                        if far == 0:
+                            if not (0 <= v < self.H and 0 <= u < self.W):
+                                far = -1
+                            elif self.d[v, u] <= seed_d + tolerance:   # the far side
+                                far = -1
+                                if step > 1 and self.d[v, u] >= 0 and \
+                                        ti.abs(self.d[v, u] - seed_d) <= tolerance:
+                                    far = step
+                    if far > 1:
+                        for step in range(1, far + 1):
+                            v, u = y + step * dy, x + step * dx
+                            if self.label[v, u] != 1:
+                                self.label[v, u] = 1
+                                self.changed[None] = 1
 
     @ti.kernel
     def keep_near(self):
@@ -455,12 +486,18 @@ class InitialRegion:
             self.keep_near()
         self.seed(y, xc)
         self.d[y, xc] = seed_d
-        rounds = self.until_stable(lambda: self.grow(seed_d, band, band))
+        def round_():
+            self.grow(seed_d, band, band)
+            if self.bridge_gap > 0:
+                self.bridge(seed_d, band, self.bridge_gap)
+        rounds = self.until_stable(round_)
         found = int((self.label.to_numpy() == 1).sum())
         self.info = {"kind": "point", "point": [point.x, point.y], "seed_cyclopean": [xc, y],
                      "seed_disparity": 2.0 * seed_d, "band_px": 2.0 * band,
                      "over": "near pixels" if near else "all pixels", "found": found,
                      "rounds": rounds, "spill": SPILL, "spill_left": SPILL_LEFT}
+        if self.bridge_gap > 0:
+            self.info["bridge_px"] = 2 * self.bridge_gap
         if found < MIN_AREA * H * W:
             raise InitError(f"init: the region under the point ({point.x}, {point.y}) has "
                             f"{found} pixels, fewer than {MIN_AREA:.1%} of the "

@@ -43,7 +43,10 @@ from ..kernels.filters import GaussianFilters
 from ..kernels.median import MedianFilter
 from .matching import cost_at
 
-__all__ = ["LevelSet", "Settle", "disparity"]
+__all__ = ["CARRY", "LevelSet", "Settle", "disparity"]
+
+#: Visible pixels on either side of a hidden run whose data terms it takes (_carry_hidden).
+CARRY = 3
 
 
 @ti.func
@@ -121,6 +124,12 @@ class LevelSet:
         self.distance_map = pool.field(ti.f32, (H, W, 1), bucket=True)
         self.distance = None
         self._settle = {}
+        # the pixels without evidence (a layer in front, lss_kernels.model.front, which sets
+        # ``hidden``): their data term is carried in from beside them (_carry_hidden)
+        self.has_hidden = params.front_margin > 0
+        self.hidden = None
+        if self.has_hidden:
+            self.data, self.force = f(), f()
 
     def setup(self):
         """Allocate the re-initialisation scratch; call once the pool is finalised."""
@@ -271,6 +280,9 @@ class LevelSet:
                     x = b * L + lane
                     if x < width:
                         self.phi_next[y, x] = self.phi[y, x]
+                        if ti.static(self.has_hidden):
+                            self.data[y, x] = 0.0
+                            self.force[y, x] = 0.0
             elif y < self.extent.height() and b < self._blocks():
                 b_x = self.filters.columns(1, y, b, (0,))[0]
                 b_y = self.filters.columns(0, y, b, (1,))[0]
@@ -293,7 +305,54 @@ class LevelSet:
                         dirac = (1.0 / math.pi) / (1.0 + p * p)
                         if band > 0 and ti.abs(p) > band:
                             dirac = 0.0
-                        self.phi_next[y, x] = p + dt * dirac * (-m1 + m2 + mu * bt[lane])
+                        data = -m1 + m2
+                        if ti.static(self.has_hidden):
+                            self.data[y, x] = data
+                            self.force[y, x] = dirac * mu * bt[lane]
+                        self.phi_next[y, x] = p + dt * dirac * (data + mu * bt[lane])
+
+    @ti.kernel
+    def _carry_hidden(self, dt: ti.f32, band: ti.f32):
+        """Eq. 2's data term over the pixels hidden by a layer in front of the object
+        (:mod:`lss_kernels.model.front`), which hold no evidence of their own: each run of
+        them along a row takes the smaller of the mean data terms of the ``CARRY`` visible
+        pixels on either side (one side at the image's border).  The object's support goes
+        on behind a thin occluder where the object lies on both sides of it, and stops at
+        it where the background lies on one."""
+        height, width = self.extent.height(), self.extent.width()
+        for y in range(height):
+            a = 0
+            while a < width:
+                if self.hidden[y, a] == 1:
+                    b = a
+                    while b < width and self.hidden[y, b] == 1:
+                        b += 1
+                    left, n_left = 0.0, 0
+                    for k in range(1, CARRY + 1):
+                        if a - k >= 0 and self.hidden[y, a - k] == 0:
+                            left += self.data[y, a - k]
+                            n_left += 1
+                    right, n_right = 0.0, 0
+                    for k in range(CARRY):
+                        if b + k < width and self.hidden[y, b + k] == 0:
+                            right += self.data[y, b + k]
+                            n_right += 1
+                    carried = 0.0
+                    if n_left > 0 and n_right > 0:
+                        carried = ti.min(left / n_left, right / n_right)
+                    elif n_left > 0:
+                        carried = left / n_left
+                    elif n_right > 0:
+                        carried = right / n_right
+                    for x in range(a, b):
+                        p = self.phi[y, x]
+                        dirac = (1.0 / math.pi) / (1.0 + p * p)
+                        if band > 0 and ti.abs(p) > band:
+                            dirac = 0.0
+                        self.phi_next[y, x] = p + dt * (dirac * carried + self.force[y, x])
+                    a = b
+                else:
+                    a += 1
 
     # ---------------------------------------------------------------- re-initialisation, stopping
     @ti.kernel
@@ -358,6 +417,8 @@ class LevelSet:
         """One descent step of Eq. 2, then (every ``reinit_every``) the signed-distance
         re-initialisation and the median filter (:meth:`settle`)."""
         self._step(cost, c_max, shapes, occ, params.dt, params.mu, self.band)
+        if self.has_hidden:
+            self._carry_hidden(params.dt, self.band)
         if reinit:
             self.reinitialise(self.phi_next)
         self.settle(shapes)

@@ -1,0 +1,101 @@
+"""A whole photo (lss_kernels.photo): the window around the start, its growth as the object
+reaches its sides, and the result pasted at the photo's size."""
+import numpy as np
+import pytest
+
+from lss_kernels import Box, Params, Point, Result
+from lss_kernels.photo import (FRONT_MARGIN, MARGIN, MAX_WINDOWS, OUTSIDE, REACH, Window,
+                               photo_params, solve_in_windows)
+
+SHAPE = (300, 500)
+
+
+def _result(foreground, disparity=10.0):
+    """A stand-in for a solve's :class:`Result` of a window."""
+    h, w = foreground.shape
+    d = np.full((h, w), 2.0, np.float32)
+    d[foreground] = disparity
+    zeros = np.zeros((h, w), np.float32)
+    return Result(disparity=d, surface=d.copy(), occlusion=np.zeros((h, w), bool),
+                  foreground=foreground, phi=zeros, theta_fg=np.zeros(6), theta_bg=np.zeros(6),
+                  consensus_mean=zeros, consensus_sigma=zeros, iterations=1, stop_reason="test",
+                  layers=foreground.astype(np.uint8))
+
+
+def test_a_window_holds_the_start_its_margins_and_the_strip_to_the_left():
+    w = Window.around((200, 100, 260, 150), 40, SHAPE)
+    assert (w.x0, w.y0, w.x1, w.y1) == (200 - MARGIN - 40, 100 - MARGIN, 260 + MARGIN + 1,
+                                        150 + MARGIN + 1)
+    clipped = Window.around((5, 5, 490, 295), 40, SHAPE)
+    assert clipped.as_tuple() == (0, 0, 500, 300)
+
+
+def test_the_sides_touched_leave_out_the_photos_border():
+    w = Window(0, 50, 200, 150)
+    mask = np.zeros(w.shape, bool)
+    mask[40:60, 0] = True              # on the photo's left border: not a side to grow
+    mask[10, -1] = True                # the window's right side, inside the photo
+    assert w.sides_touched(mask, SHAPE) == ["right"]
+    mask[0, 50] = True
+    assert w.sides_touched(mask, SHAPE) == ["top", "right"]
+
+
+def test_the_window_follows_the_object_until_it_holds_it():
+    # a 241 x 331 object under a point at (300, 200) of a 600 x 400 photo, d_max 64: the first
+    # window (the point +- REACH, MARGIN around, d_max more to the left) cuts its right
+    # side; the second adds the object's box with the margins (its disparity, 30 px, to the
+    # left) and holds it
+    shape = (400, 600)
+    left = np.zeros(shape + (3,), np.float32)
+    truth = np.zeros(shape, bool)
+    truth[60:301, 150:481] = True
+    first = Window(300 - REACH - MARGIN - 64, 200 - REACH - MARGIN, 300 + REACH + MARGIN + 1,
+                   200 + REACH + MARGIN + 1)
+    second = Window(first.x0, 60 - MARGIN, 460 + MARGIN + 1, first.y1)
+    calls = []
+
+    def run(l, r, start):
+        window = (first, second)[len(calls)]
+        calls.append((l.shape[:2], start))
+        return _result(window.crop(truth), disparity=30.0), None
+    result, _ = solve_in_windows(run, left, left, 64.0, Point(300, 200))
+    assert [c[0] for c in calls] == [first.shape, second.shape]
+    assert calls[0][1] == Point(300 - first.x0, 200 - first.y0)
+    # the second solve starts from the object found in the first, in its own window
+    assert calls[1][1].shape == second.shape
+    assert calls[1][1].sum() == first.crop(truth).sum()
+    assert result.window == second.as_tuple()
+    assert [w["touched"] for w in result.recovery["windows"]] == [["right"], []]
+    assert result.disparity.shape == shape and np.isinf(result.disparity[0, -1])
+    assert np.array_equal(result.foreground, truth)
+    assert (result.layers != OUTSIDE).sum() == second.shape[0] * second.shape[1]
+
+
+def test_the_window_stops_growing_after_max_windows():
+    left = np.zeros(SHAPE + (3,), np.float32)
+    calls = []
+
+    def run(l, r, start):         # an object that always fills its window
+        calls.append(1)
+        return _result(np.ones(l.shape[:2], bool)), None
+    result, _ = solve_in_windows(run, left, left, 32.0, Box(200, 100, 240, 140))
+    assert 1 < len(calls) <= MAX_WINDOWS
+
+
+def test_auto_solves_the_whole_photo():
+    left = np.zeros(SHAPE + (3,), np.float32)
+
+    def run(l, r, start):
+        assert start == "auto" and l.shape[:2] == SHAPE
+        fg = np.zeros(SHAPE, bool)
+        fg[100:150, 200:260] = True
+        return _result(fg), None
+    result, _ = solve_in_windows(run, left, left, 32.0, "auto")
+    assert result.window == (0, 0, SHAPE[1], SHAPE[0])
+
+
+def test_photo_params_turn_the_third_layer_on_once():
+    assert photo_params().front_margin == FRONT_MARGIN
+    assert photo_params(Params(front_margin=6.0)).front_margin == 6.0
+    with pytest.raises(ValueError, match="front_margin"):
+        Params(front_margin=-1.0)
