@@ -47,10 +47,7 @@ class Params:
         Iteration cap (the paper runs 1500).
     min_iterations : int
         The stopping rule is not consulted before this many iterations (three windows: the
-        boundary has been re-initialised and the background swept a few times).  A higher
-        floor mostly holds a settled boundary: against a floor of 200, 60 keeps the F1 of
-        every paper15, stress and random scene measured within 0.002 but one, a slow
-        creep that stops earlier (``docs/design.md``, the stopping rule).
+        boundary has been re-initialised and the background swept a few times).
     stop_window : int
         The stopping rule looks at the foreground changes over this many iterations.
     stop_shift : float
@@ -70,11 +67,8 @@ class Params:
         0 leaves this test out.
     stop_patience : int
         Stop after this many consecutive quiet windows.  Windows before ``min_iterations``
-        count towards it: the rule can fire at ``min_iterations``.  One window of 20
-        iterations (0.1 px, 1 px) ends paper15 at a median of 140 iterations (two windows
-        in which under 0.2 % of the foreground changed: 180) at the same F1; without the
-        surface test it stopped an L whose surfaces still alternated at F1 0.84 instead of
-        0.96 (``docs/design.md``, the stopping rule).
+        count towards it: the rule can fire at ``min_iterations``.  With the defaults paper15
+        stops at a median of 140 iterations (``docs/design.md``, the stopping rule).
     phi_scale : float
         phi is a signed distance (in pixels) times this factor (the release: 0.01).
     narrow_band : float

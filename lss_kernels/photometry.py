@@ -4,9 +4,7 @@ The paper's matching cost M is the absolute colour difference, which assumes tha
 point looks the same in both views.  Real rigs break that: the cameras' exposures and
 offsets differ, their gamma differs, and lenses darken towards the corners (vignetting).
 A difference of a few grey levels raises M at every true match by as much, and a layer
-whose texture is weaker than the difference loses its matches (stress scene
-``weak_fg_grey`` with the right view 20/255 brighter: occlusion F1 0.99 -> 0.83; darkened
-by 40 % in the corners: 0.66).
+whose texture is weaker than the difference loses its matches.
 
 Before the solve the difference is measured and, where a simple model explains it, the
 right view is corrected to the left one's photometry.  On grey copies of the pair at the

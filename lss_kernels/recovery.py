@@ -33,8 +33,7 @@ records what happened, and a model kept collapsed warns :class:`CollapsedModelWa
 output is no two-layer reading of the pair (a layer with too little texture, or texture lost
 in noise, ``docs/stress.md``).
 
-Neither change is the default: on the paper's scenes AD-Census lowers the mean occlusion F1
-from 0.79 to 0.76 and the distinctness weights to 0.76 (``docs/design.md``).
+Neither change is the default: each costs occlusion F1 on the paper's scenes.
 
 A periodic texture does not always collapse the model: the stripes can be explained by a
 sound-looking model at the wrong disparity, whose boundary wanders over the background.  So
@@ -45,8 +44,8 @@ rises back to a peak ``2 PERIODIC_SCORE`` above its lowest value at a smaller la
 from -1 at half the period to +1 at the period, a rise of 2; real texture decorrelates and
 stays near 0).  When at least ``PERIODIC_AREA`` of the tiles are periodic, the first solve
 uses ``PERIODIC`` -- ``RECOVERY`` without the refinement, whose residuals need distinct
-matches (on the stress scenes with stripes on both layers it raised bad-4.0 from 34 to 61 %)
--- and the retry, if its model collapses, the given parameters.
+matches (on stripes they lie whole periods off) -- and the retry, if its model collapses,
+the given parameters.
 """
 import contextlib
 import warnings

@@ -46,8 +46,7 @@ def _grey(image) -> bool:
 def check_pair(left, right):
     """Both images read (:func:`lss_kernels.io.read_image`) and of one size.  When one view is
     grey and the other colour, the colour one is made grey too (Rec. 601 luma): a grey pixel
-    compared with a colour one differs at the true match too (the rendered slanted scene:
-    occlusion F1 0.44 against 0.84 with both grey)."""
+    compared with a colour one differs at the true match too."""
     from .io import read_image
     left = read_image(left, name="left")
     right = read_image(right, name="right")

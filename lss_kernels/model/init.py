@@ -47,7 +47,7 @@ recovered by the evolution, one that covers only part of it is not always (paper
 Theta_2 bulges over the uncovered part).  Except, for a point's and a box's region, towards
 the left (``SPILL_LEFT``): the object's left edge is where the background is seen by the
 left camera only, and a start that spills over it can carry the foreground on over the
-background (paper15 scene 2: F1 0.18 widened all round, 0.67 not to the left).
+background (paper15 scene 2's tall pin spreads over the wall beside it).
 
 Every choice is reported in :attr:`InitialRegion.info`.
 """

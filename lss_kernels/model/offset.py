@@ -20,12 +20,9 @@ with no prior, the map the automatic start reads too) puts at least ``FLOOR_SHAR
 confident pixels near the grid's floor (below ``FLOOR_C``: 4 px).  Such a pair is loaded
 again into fields of one plane more, ``c_max = ceil(d_max / 2) + 1``, and searched over
 ``0 .. 2 ceil(d_max / 2)``; every other pair keeps the authors' grid and fields, bit for
-bit.  (Fields of one plane more for every pair would move every pair's first consensus a
-little, through the levels' normalisation and the messages' sigma, and flip scenes on a
-knife edge; moving every pair would cost paper15 0.01 of mean F1: ``docs/design.md``.)
-Measured (``lss eval``): on 16 rendered 320x240 probes with the background at 0-3 px, mean
-occlusion F1 0.86 -> 0.96 (SGBM 0.93), the lowest 0.00 -> 0.89, bad-4.0 3.3 -> 0.1 %; the
-floor shares there 0.72-0.82, on paper15 0.00-0.06, where nothing moves.
+bit: fields of one plane more would move every pair's first consensus a little, through the
+levels' min-max normalisation and the messages' sigma.  The floor share of paper15's pairs is
+0.00-0.06 (none moves); of rendered pairs with the background at 0-3 px, 0.72-0.82.
 """
 import numpy as np
 
