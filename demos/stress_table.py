@@ -26,7 +26,7 @@ and a one-line `description`). The families:
 
 | family | what it tests |
 |---|---|
-| `periodic` | vertical sinusoidal stripes (period 3–8 px) on the foreground, the background or both |
+| `periodic` | vertical stripes (period 3–8 px) on the foreground, the background or both |
 | `camouflage` | both layers drawn from the same texture statistics |
 | `weak` | low contrast: a few grey levels of texture, mid-grey or dark |
 | `curved` | curved backgrounds: a bowl, cylinders along x and y, a dark weakly textured ball |

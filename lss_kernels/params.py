@@ -143,9 +143,9 @@ class Params:
         ``(0, 0)``: the strips of the two quadratics, the paper's; so it is without
         ``refine``.
     message_ambiguity : float
-        0: a patch's message weighs 1 / sigma_p^2 (Eq. 5).  > 0: also times its cost
-        curve's distinctness ``clip((1 - r) / message_ambiguity, 0, 1)``, ``r`` the peak
-        ratio of the second-deepest minimum (:class:`~lss_kernels.model.messages.Messages`).
+        0: a patch's message weighs 1 / sigma_p^2 in the consensus (Eq. 7).  > 0: also times
+        its cost curve's distinctness ``clip((1 - r) / message_ambiguity, 0, 1)``, ``r`` the
+        peak ratio of the second-deepest minimum (:class:`~lss_kernels.model.messages.Messages`).
     recover : bool
         A model that collapsed (no foreground, no disparity jump, the foreground behind the
         background, or its surface outside ``[0, d_max]``) is solved again with the

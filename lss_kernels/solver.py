@@ -236,7 +236,7 @@ class Solver:
         return mask
 
     def _first_consensus(self):
-        """The consensus with no prior and no validity (Eqs. 4-6 brought down to pixels)."""
+        """The consensus (Eq. 7) of messages with no prior (Eq. 5), every patch valid."""
         self.messages.run(0.0, False, False)
         self.hierarchy.downward()
 

@@ -2,7 +2,7 @@
 
 The paper starts phi from an ellipse placed by hand.  These initialisations find the object
 from the method's own machinery instead: the first consensus of the cooperative hierarchy
-(Eqs. 4-7 with no prior and no validity) gives a disparity d-bar per cyclopean pixel with its
+(Eqs. 5 and 7 with no prior, every patch valid) gives a disparity d-bar per cyclopean pixel with its
 precision; pixels of zero precision have no d-bar.  Per pixel, in kernels, d-bar is first
 median-filtered (``MEDIAN`` squared, as phi is after each Eq. 2 step), which fills the gaps
 and removes stray matches.  Then:

@@ -1,10 +1,11 @@
 """Where the disparity grid starts: at 2 px as in the authors' release, or at 0 px for a pair
 whose background lies farther.
 
-The cost volumes sample integer cyclopean disparities ``c = 1 .. c_max`` (Sec. 4; left-view
-disparity ``2c``), so the smallest disparity the model can hold is 2 px.  A background
-farther than that is fitted at 2 px, with its occluded strip too short, and one at 3 px lies
-within a plane of the floor, where a message has no plane below to be refined with.
+The cost volumes sample integer cyclopean disparities ``c = 1 .. c_max`` (the authors'
+release; left-view disparity ``2c``), so the smallest disparity the model can hold is 2 px.
+A background farther than that is fitted at 2 px, with its occluded strip too short, and one
+at 3 px lies within a plane of the floor, where a message has no plane below to be refined
+with.
 
 For such a pair the solver moves each view ``SHIFT`` pixels apart before the costs,
 ``left'(x) = left(x - SHIFT)`` and ``right'(x) = right(x + SHIFT)``: a user disparity ``d`` is
