@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from .model.init import AUTO, Box, Point
+from .start_types import AUTO, Box, Point
 
 __all__ = ["available_memory", "check_init", "check_inputs", "check_memory", "check_pair",
            "check_range", "fields_bytes", "parse_init"]

@@ -76,7 +76,7 @@ def scene_start(scene: io.Scene, init=None):
     """``(init, frame)`` for a scene: its own ellipse (or ``auto`` without one) when ``init``
     is None; ``"auto"``; ``"gt-point"`` / ``"gt-box"``: a point at the centroid / the bounding
     box of the ground-truth foreground (a click, a detector), to measure those starts."""
-    from ..model.init import Box, Point
+    from ..start_types import Box, Point
     from .jobs import scene_init
     if init in ("gt-point", "gt-box"):
         if scene.fg_left is None or not scene.fg_left.any():
@@ -145,7 +145,7 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
     """Disparity and occlusion (left view) of one method on one scene, extra facts, and the
     seconds spent on the trace."""
     if method == "lss":
-        from ..model.init import InitError
+        from ..start_types import InitError
         from ..recovery import named_warnings, with_recovery
         from .jobs import sweep_summary
 

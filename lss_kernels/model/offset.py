@@ -80,9 +80,9 @@ def to_user_left(plane: np.ndarray, shift: int) -> np.ndarray:
 
 
 def to_model_start(init, shift: int):
-    """A :class:`~lss_kernels.model.init.Point` or :class:`~lss_kernels.model.init.Box` of the
-    user's left view in the model's; ``"auto"`` as it is."""
-    from .init import Box, Point
+    """A :class:`~lss_kernels.start_types.Point` or :class:`~lss_kernels.start_types.Box` of
+    the user's left view in the model's; ``"auto"`` as it is."""
+    from ..start_types import Box, Point
     if isinstance(init, Point):
         return Point(init.x + shift, init.y)
     if isinstance(init, Box):
