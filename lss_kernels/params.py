@@ -1,10 +1,11 @@
-"""Parameters of the method, with the paper's defaults, validated once at the boundary.
+"""Parameters of the method, validated once at the boundary: ``Params()``, the recommended
+defaults, and ``Params.paper()``, the paper's method and nothing beyond it.
 
 Section 4 of the paper: dt = 0.2, alpha = (0.2, 0.8, 0.1), mu = 4.0, beta = 0.4 / d_max, phi
 re-initialised to a signed distance every 10 iterations and 7x7-median-filtered after every
 step.  The remaining values are the choices of the authors' public release (patch sizes, filter
 widths, thresholds); ``mono_threshold`` is one value for every scene where the release tuned it
-per scene.
+per scene.  The defaults add what the paper does not have (``Params.paper`` lists it).
 """
 from __future__ import annotations
 
@@ -290,6 +291,23 @@ class Params:
         if not isinstance(self.photometric, bool):
             raise ValueError(f"params.photometric: expected True or False, got "
                              f"{self.photometric!r}")
+
+    @classmethod
+    def paper(cls, **changes) -> "Params":
+        """The paper's method as the authors' release runs it, and nothing beyond it: the
+        absolute-difference cost, Eq. 2's step everywhere (no narrow band), the integer
+        argmin of Eq. 5, Theta_2 by the Eq. 8 fit alone (no plane sweep), the start ellipse
+        as drawn, the two quadratics as the output (no refinement, the z-buffer's strips),
+        no photometric correction, no recovery solve, the release's grid from 2 px.  Theta's
+        rows are weighted as the release does (``shape_weight_power`` 2).  The stopping rule
+        stands for the paper's "upon convergence" (the release runs ``max_iterations``,
+        1500).  ``changes`` as for :meth:`replace`."""
+        return cls().replace(**{
+            "matching_cost": "ad", "narrow_band": 0.0, "subpixel_messages": False,
+            "background_sweep": 0.0, "refine_ellipse": False, "refine": False,
+            "strip_window": (0, 0), "photometric": False, "recover": False,
+            "zero_floor": False, "message_ambiguity": 0.0, "robust_fit": 0.0,
+            "exclusive_fit": False, **changes})
 
     def replace(self, **changes) -> "Params":
         """A copy with some fields changed (validated)."""
