@@ -1,6 +1,6 @@
 """Whole ``lss solve --scene`` processes of two commits, timed side by side in one run.
 
-    python demos/side_by_side.py --base REV [--dataset DIR] [--scenes N] [--init START] [--out FILE]
+    python demos/side_by_side.py --base REV --dataset DIR [--scenes N] [--init START] [--out FILE]
 
 The base commit's package is exported with ``git archive`` into a temporary folder and run
 through its own ``lss`` entry point (read from its ``pyproject.toml``) with the interpreter
@@ -82,8 +82,7 @@ def solve(tree: Path, scene: Path, out: Path, cache: Path, arch: str,
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", required=True, help="the commit to compare against")
-    parser.add_argument("--dataset", default="../shared/data/paper15",
-                        help="folder of scene folders (default: ../shared/data/paper15)")
+    parser.add_argument("--dataset", required=True, help="folder of scene folders")
     parser.add_argument("--scenes", type=int, default=0, help="only the first N scenes")
     parser.add_argument("--arch", default="cpu")
     parser.add_argument("--init", choices=("scene", "gt-box", "gt-point", "auto"),

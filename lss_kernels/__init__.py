@@ -16,6 +16,6 @@ def __getattr__(name):
         from . import solver
         return getattr(solver, name)
     if name in ("Point", "Box"):
-        from .model import init
-        return getattr(init, name)
+        from . import start_types
+        return getattr(start_types, name)
     raise AttributeError(name)

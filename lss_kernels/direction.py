@@ -47,7 +47,8 @@ import math
 import numpy as np
 
 __all__ = ["MARGIN", "RANGE_FLOOR", "RANGE_GAP", "RANGE_SHARE", "SHORT_SHARE", "SWAPPED_RATIO",
-           "SWAPPED_SHARE", "estimate_range", "match_direction", "match_range"]
+           "SWAPPED_SHARE", "box_sums", "estimate_range", "grey_copies", "match_direction",
+           "match_range", "textured_windows", "window_detail"]
 
 MAX_WIDTH = 320        # the check's image width at most, pixels (block averages)
 WINDOW = 5             # side of the square that sums absolute differences, pixels
@@ -62,7 +63,7 @@ RANGE_GAP = 8          # ... such shifts farther apart than this (px) split into
 RANGE_SHARE = 0.003    # ... and runs with less than this share of the kept matches are dropped
 
 
-def _box(a, k):
+def box_sums(a, k):
     """Sums of ``a`` over ``k x k`` windows (valid part: ``(H - k + 1, W - k + 1)``; the
     running sums in float64, which keep a window's sum exact to well below its pixels')."""
     c = np.pad(np.cumsum(np.cumsum(a, axis=0, dtype=np.float64), axis=1), ((1, 0), (1, 0)))
@@ -76,24 +77,24 @@ def _grey(image, f):
     return g[:H, :W].reshape(H // f, f, W // f, f).mean(axis=(1, 3))
 
 
-def _greys(left, right):
+def grey_copies(left, right):
     """The check's scale (block size) and the pair's grey copies at it."""
     f = max(1, math.ceil(np.shape(left)[1] / MAX_WIDTH))
     return f, _grey(left, f), _grey(right, f)
 
 
-def _textured(g):
+def textured_windows(g):
     """The windows of ``g`` whose mean absolute horizontal difference is above ``TEXTURE``
-    (the valid part of :func:`_box`)."""
+    (the valid part of :func:`box_sums`)."""
     gradient = np.abs(np.diff(g, axis=1, append=g[:, -1:]))
-    return _box(gradient, WINDOW) > TEXTURE * WINDOW * WINDOW
+    return box_sums(gradient, WINDOW) > TEXTURE * WINDOW * WINDOW
 
 
-def _detail(g):
+def window_detail(g):
     """``g`` less its mean over the ``WINDOW`` square around each pixel (edges repeated): a
     gain or offset between the views then scales the costs of true matches, not raises them."""
     h = WINDOW // 2
-    return g - _box(np.pad(g, h, mode="edge"), WINDOW) / (WINDOW * WINDOW)
+    return g - box_sums(np.pad(g, h, mode="edge"), WINDOW) / (WINDOW * WINDOW)
 
 
 def match_direction(left, right, d_max) -> dict:
@@ -103,7 +104,7 @@ def match_direction(left, right, d_max) -> dict:
     ``d_max``: the searched range, left-view pixels.  Returns ``stated`` and ``reversed``
     (the share of textured pixels each direction wins), ``textured`` (their count at the
     check's scale), ``scale`` (the block size) and ``swapped`` (bool)."""
-    f, gl, gr = _greys(left, right)
+    f, gl, gr = grey_copies(left, right)
     H, W = gl.shape
     D = min(max(1, math.ceil(float(d_max) / f)), (W - WINDOW) // 2)
     facts = {"scale": f, "textured": 0, "stated": 0.0, "reversed": 0.0, "swapped": False}
@@ -115,9 +116,9 @@ def match_direction(left, right, d_max) -> dict:
         cost = np.full((H - WINDOW + 1, W - 2 * D - WINDOW + 1), np.inf)
         for s in range(1, D + 1):
             shifted = gr[:, D + sign * s:W - D + sign * s]
-            cost = np.minimum(cost, _box(np.abs(gl[:, cols] - shifted), WINDOW))
+            cost = np.minimum(cost, box_sums(np.abs(gl[:, cols] - shifted), WINDOW))
         best.append(cost)
-    textured = _textured(gl[:, cols])
+    textured = textured_windows(gl[:, cols])
     n = int(textured.sum())
     facts["textured"] = n
     if n < MIN_TEXTURED:
@@ -136,7 +137,7 @@ def match_range(left, right, d_max) -> dict:
     pixels whose best cost at shifts ``d_max < s <= 2 d_max`` is below ``MARGIN`` times their
     best within the range), ``textured``, ``scale`` and ``short`` (bool); ``short`` is False
     without a verdict (an image too narrow for the shifts, or too little texture)."""
-    f, gl, gr = _greys(left, right)
+    f, gl, gr = grey_copies(left, right)
     H, W = gl.shape
     D = max(1, math.ceil(float(d_max) / f))
     E = min(2 * D, W - 2 * WINDOW)             # the farthest shift read; columns E .. W - 1
@@ -147,15 +148,15 @@ def match_range(left, right, d_max) -> dict:
     def best(a, b, shifts):
         cost = np.full((H - WINDOW + 1, W - E - WINDOW + 1), np.inf)
         for s in shifts:
-            cost = np.minimum(cost, _box(np.abs(a[:, E:] - b[:, E - s:W - s]), WINDOW))
+            cost = np.minimum(cost, box_sums(np.abs(a[:, E:] - b[:, E - s:W - s]), WINDOW))
         return cost
-    textured = _textured(gl[:, E:])
+    textured = textured_windows(gl[:, E:])
     n = int(textured.sum())
     facts["textured"] = n
     if n < MIN_TEXTURED:
         return facts
     beyond_wins = textured
-    for a, b in ((gl, gr), (_detail(gl), _detail(gr))):
+    for a, b in ((gl, gr), (window_detail(gl), window_detail(gr))):
         beyond_wins = beyond_wins & (best(a, b, range(D + 1, E + 1))
                                      < MARGIN * best(a, b, range(0, D + 1)))
     share = float(beyond_wins.sum()) / n
@@ -171,17 +172,17 @@ def estimate_range(left, right) -> dict:
     px, a multiple of 8, at least 16 and below the width), ``farthest`` (the farthest shift with signal, px),
     ``matches`` (the pixels kept, at the check's scale) and ``scale``.  Raises ValueError
     when fewer than ``MIN_TEXTURED`` matches are kept (too little texture)."""
-    f, gl, gr = _greys(left, right)
+    f, gl, gr = grey_copies(left, right)
     H, W = gl.shape
     S = W // 2
     if H < WINDOW or S < 1:
         raise ValueError(f"left: {W * f}x{H * f} pixels are too few to estimate d_max; give it")
-    dl, dr = _detail(gl), _detail(gr)
+    dl, dr = window_detail(gl), window_detail(gr)
     Hc, Wc = H - WINDOW + 1, W - WINDOW + 1
     cost = np.full((S + 1, Hc, Wc), np.inf, np.float32)
     for s in range(S + 1):                     # left x against right x - s, x >= s
-        cost[s, :, s:] = (_box(np.abs(gl[:, s:] - gr[:, :W - s]), WINDOW)
-                          + _box(np.abs(dl[:, s:] - dr[:, :W - s]), WINDOW))
+        cost[s, :, s:] = (box_sums(np.abs(gl[:, s:] - gr[:, :W - s]), WINDOW)
+                          + box_sums(np.abs(dl[:, s:] - dr[:, :W - s]), WINDOW))
     best = np.argmin(cost, axis=0)
     lowest = np.take_along_axis(cost, best[None], 0)[0]
     shifts = np.arange(S + 1)[:, None, None]
@@ -196,7 +197,7 @@ def estimate_range(left, right) -> dict:
         back_best[:, :Wc - s] = np.where(better, s, back_best[:, :Wc - s])
     u = np.arange(Wc)[None, :] - best
     mutual = np.abs(np.take_along_axis(back_best, np.clip(u, 0, Wc - 1), 1) - best) <= 1
-    kept = (_textured(gl) & np.isfinite(lowest) & (lowest < MARGIN * beyond)
+    kept = (textured_windows(gl) & np.isfinite(lowest) & (lowest < MARGIN * beyond)
             & (u >= 0) & mutual)
     found = best[kept]
     if found.size < MIN_TEXTURED:

@@ -1,10 +1,11 @@
-"""Parameters of the method, with the paper's defaults, validated once at the boundary.
+"""Parameters of the method, validated once at the boundary: ``Params()``, the recommended
+defaults, and ``Params.paper()``, the paper's method and nothing beyond it.
 
 Section 4 of the paper: dt = 0.2, alpha = (0.2, 0.8, 0.1), mu = 4.0, beta = 0.4 / d_max, phi
 re-initialised to a signed distance every 10 iterations and 7x7-median-filtered after every
 step.  The remaining values are the choices of the authors' public release (patch sizes, filter
 widths, thresholds); ``mono_threshold`` is one value for every scene where the release tuned it
-per scene.
+per scene.  The defaults add what the paper does not have (``Params.paper`` lists it).
 """
 from __future__ import annotations
 
@@ -47,10 +48,7 @@ class Params:
         Iteration cap (the paper runs 1500).
     min_iterations : int
         The stopping rule is not consulted before this many iterations (three windows: the
-        boundary has been re-initialised and the background swept a few times).  A higher
-        floor mostly holds a settled boundary: against a floor of 200, 60 keeps the F1 of
-        every paper15, stress and random scene measured within 0.002 but one, a slow
-        creep that stops earlier (``docs/design.md``, the stopping rule).
+        boundary has been re-initialised and the background swept a few times).
     stop_window : int
         The stopping rule looks at the foreground changes over this many iterations.
     stop_shift : float
@@ -70,11 +68,8 @@ class Params:
         0 leaves this test out.
     stop_patience : int
         Stop after this many consecutive quiet windows.  Windows before ``min_iterations``
-        count towards it: the rule can fire at ``min_iterations``.  One window of 20
-        iterations (0.1 px, 1 px) ends paper15 at a median of 140 iterations (two windows
-        in which under 0.2 % of the foreground changed: 180) at the same F1; without the
-        surface test it stopped an L whose surfaces still alternated at F1 0.84 instead of
-        0.96 (``docs/design.md``, the stopping rule).
+        count towards it: the rule can fire at ``min_iterations``.  With the defaults paper15
+        stops at a median of 140 iterations (``docs/design.md``, the stopping rule).
     phi_scale : float
         phi is a signed distance (in pixels) times this factor (the release: 0.01).
     narrow_band : float
@@ -149,9 +144,9 @@ class Params:
         ``(0, 0)``: the strips of the two quadratics, the paper's; so it is without
         ``refine``.
     message_ambiguity : float
-        0: a patch's message weighs 1 / sigma_p^2 (Eq. 5).  > 0: also times its cost
-        curve's distinctness ``clip((1 - r) / message_ambiguity, 0, 1)``, ``r`` the peak
-        ratio of the second-deepest minimum (:class:`~lss_kernels.model.messages.Messages`).
+        0: a patch's message weighs 1 / sigma_p^2 in the consensus (Eq. 7).  > 0: also times
+        its cost curve's distinctness ``clip((1 - r) / message_ambiguity, 0, 1)``, ``r`` the
+        peak ratio of the second-deepest minimum (:class:`~lss_kernels.model.messages.Messages`).
     recover : bool
         A model that collapsed (no foreground, no disparity jump, the foreground behind the
         background, or its surface outside ``[0, d_max]``) is solved again with the
@@ -303,6 +298,23 @@ class Params:
             raise ValueError(f"params.photometric: expected True or False, got "
                              f"{self.photometric!r}")
         need("front_margin", nonneg, "a finite number of pixels >= 0 (0: two layers)")
+
+    @classmethod
+    def paper(cls, **changes) -> "Params":
+        """The paper's method as the authors' release runs it, and nothing beyond it: the
+        absolute-difference cost, Eq. 2's step everywhere (no narrow band), the integer
+        argmin of Eq. 5, Theta_2 by the Eq. 8 fit alone (no plane sweep), the start ellipse
+        as drawn, the two quadratics as the output (no refinement, the z-buffer's strips),
+        no photometric correction, no recovery solve, the release's grid from 2 px.  Theta's
+        rows are weighted as the release does (``shape_weight_power`` 2).  The stopping rule
+        stands for the paper's "upon convergence" (the release runs ``max_iterations``,
+        1500).  ``changes`` as for :meth:`replace`."""
+        return cls().replace(**{
+            "matching_cost": "ad", "narrow_band": 0.0, "subpixel_messages": False,
+            "background_sweep": 0.0, "refine_ellipse": False, "refine": False,
+            "strip_window": (0, 0), "photometric": False, "recover": False,
+            "zero_floor": False, "message_ambiguity": 0.0, "robust_fit": 0.0,
+            "exclusive_fit": False, **changes})
 
     def replace(self, **changes) -> "Params":
         """A copy with some fields changed (validated)."""

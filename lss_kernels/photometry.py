@@ -4,9 +4,7 @@ The paper's matching cost M is the absolute colour difference, which assumes tha
 point looks the same in both views.  Real rigs break that: the cameras' exposures and
 offsets differ, their gamma differs, and lenses darken towards the corners (vignetting).
 A difference of a few grey levels raises M at every true match by as much, and a layer
-whose texture is weaker than the difference loses its matches (stress scene
-``weak_fg_grey`` with the right view 20/255 brighter: occlusion F1 0.99 -> 0.83; darkened
-by 40 % in the corners: 0.66).
+whose texture is weaker than the difference loses its matches.
 
 Before the solve the difference is measured and, where a simple model explains it, the
 right view is corrected to the left one's photometry.  On grey copies of the pair at the
@@ -31,7 +29,8 @@ import math
 
 import numpy as np
 
-from .direction import MIN_TEXTURED, WINDOW, _box, _detail, _greys, _textured
+from .direction import (MIN_TEXTURED, WINDOW, box_sums, grey_copies, textured_windows,
+                        window_detail)
 
 __all__ = ["EXPLAINED", "MIN_DIFFERENCE", "equalise", "fit"]
 
@@ -56,27 +55,27 @@ def fit(left, right, d_max) -> dict:
     ``difference`` and ``residual`` (median absolute difference of the 5x5 means at the
     matches, before and after the model), ``matches`` and ``correct`` (bool), with ``why``
     when the pair is left as it is."""
-    f, gl, gr = _greys(left, right)
+    f, gl, gr = grey_copies(left, right)
     H, W = gl.shape
     D = max(1, math.ceil(float(d_max) / f))
     facts = {"matches": 0, "correct": False}
     if W - D < 2 * WINDOW or H < WINDOW:
         return {**facts, "why": "the image is too narrow for the search range"}
-    detail_left, detail_right = _detail(gl), _detail(gr)
+    detail_left, detail_right = window_detail(gl), window_detail(gr)
     cost = np.full((H - WINDOW + 1, W - D - WINDOW + 1), np.inf)
     shift = np.zeros(cost.shape, np.int64)
     for s in range(D + 1):
-        c = _box(np.abs(detail_left[:, D:] - detail_right[:, D - s:W - s]), WINDOW)
+        c = box_sums(np.abs(detail_left[:, D:] - detail_right[:, D - s:W - s]), WINDOW)
         better = c < cost
         cost[better], shift[better] = c[better], s
-    ys, xs = np.nonzero(_textured(gl[:, D:]))
+    ys, xs = np.nonzero(textured_windows(gl[:, D:]))
     facts["matches"] = int(ys.size)
     if ys.size < MIN_TEXTURED:
         return {**facts, "why": f"fewer than {MIN_TEXTURED} textured pixels"}
     area = WINDOW * WINDOW
     xr = xs + D - shift[ys, xs]                    # the right window's first column
-    a = _box(gl, WINDOW)[:, D:][ys, xs] / area
-    b = _box(gr, WINDOW)[ys, xr] / area
+    a = box_sums(gl, WINDOW)[:, D:][ys, xs] / area
+    b = box_sums(gr, WINDOW)[ys, xr] / area
     r2 = _radius2(xr + WINDOW // 2, ys + WINDOW // 2, W, H)
     A = np.stack([a, a * r2, np.ones_like(a)], axis=1)
     keep = np.ones(a.size, bool)

@@ -33,34 +33,28 @@ records what happened, and a model kept collapsed warns :class:`CollapsedModelWa
 output is no two-layer reading of the pair (a layer with too little texture, or texture lost
 in noise, ``docs/stress.md``).
 
-Neither change is the default: on the paper's scenes AD-Census lowers the mean occlusion F1
-from 0.79 to 0.76 and the distinctness weights to 0.76 (``docs/design.md``).
+Neither change is the default: each costs occlusion F1 on the paper's scenes.
 
 A periodic texture does not always collapse the model: the stripes can be explained by a
 sound-looking model at the wrong disparity, whose boundary wanders over the background.  So
-the left image is examined first (:func:`periodic_fraction`): in tiles of ``TILE`` pixels,
-the autocorrelation of the horizontal grey-level gradient along the rows, at lags 1 to
-``MAX_PERIOD`` pixels, is computed; a tile is periodic when the correlation, after falling,
-rises back to a peak ``2 PERIODIC_SCORE`` above its lowest value at a smaller lag (stripes:
-from -1 at half the period to +1 at the period, a rise of 2; real texture decorrelates and
-stays near 0).  When at least ``PERIODIC_AREA`` of the tiles are periodic, the first solve
+the left image is examined first (:mod:`lss_kernels.periodicity`).  When at least
+``PERIODIC_AREA`` of its tiles are periodic, the first solve
 uses ``PERIODIC`` -- ``RECOVERY`` without the refinement, whose residuals need distinct
-matches (on the stress scenes with stripes on both layers it raised bad-4.0 from 34 to 61 %)
--- and the retry, if its model collapses, the given parameters.
+matches (on stripes they lie whole periods off) -- and the retry, if its model collapses,
+the given parameters.
 """
 import contextlib
 import warnings
 
 import numpy as np
 
-from .model.init import InitError
-from .validate import LUMA
+from .periodicity import PERIODIC_AREA, periodic_fraction
+from .start_types import InitError
 
 __all__ = ["CollapsedModelWarning", "MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE",
-           "MIN_JUMP", "PERIODIC", "PERIODIC_AREA", "RECOVERY", "ShortRangeWarning",
-           "SwappedViewsWarning", "UnreliableStartWarning", "WARNINGS", "collapse",
-           "layer_offsets", "model_health", "named_warnings", "periodic_fraction",
-           "periodicity", "with_recovery"]
+           "MIN_JUMP", "PERIODIC", "RECOVERY", "ShortRangeWarning", "SwappedViewsWarning",
+           "UnreliableStartWarning", "WARNINGS", "collapse", "layer_offsets", "model_health",
+           "named_warnings", "with_recovery"]
 
 #: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
 MIN_JUMP = 1.0
@@ -75,56 +69,6 @@ MAX_OFFSET = 4.0
 RECOVERY = {"matching_cost": "ad_census", "message_ambiguity": 0.2}
 #: The parameters of the first solve of a periodic pair.
 PERIODIC = {**RECOVERY, "refine": False}
-#: Rows and columns of the tiles in which periodicity is measured.
-TILE = (16, 64)
-#: Largest lag (period) searched, pixels.
-MAX_PERIOD = 32
-#: Half the rise of the autocorrelation back to a peak that makes a tile periodic.
-PERIODIC_SCORE = 0.6
-#: Fraction of periodic tiles from which a pair is solved with ``PERIODIC`` first.
-PERIODIC_AREA = 0.05
-
-
-def periodicity(image) -> np.ndarray:
-    """Per tile of ``TILE`` pixels, how periodic the image is along its rows, in [0, 1]:
-    half the largest rise of the normalised autocorrelation of the horizontal gradient of
-    grey, from its lowest value at smaller lags to a local peak at a lag in
-    ``2 .. MAX_PERIOD - 1``; 0 for flat tiles and where no peak follows a dip.  ``image``:
-    ``(H, W)`` grey or ``(H, W, 3)`` RGB.  Tiles cover the image from the top left; the
-    last ``MAX_PERIOD`` columns only serve as shifted copies.  Returns ``(rows, cols)``."""
-    image = np.asarray(image, np.float64)
-    grey = image[..., :3] @ LUMA if image.ndim == 3 else image
-    gx = np.diff(grey, axis=1)
-    th, tw = TILE
-    rows, cols = gx.shape[0] // th, (gx.shape[1] - MAX_PERIOD) // tw
-    if rows <= 0 or cols <= 0:
-        return np.zeros((max(rows, 0), max(cols, 0)))
-    gx = gx[:rows * th]
-
-    def tile_sums(a):
-        return a.reshape(rows, th, cols, tw).sum(axis=(1, 3))
-
-    base = gx[:, :cols * tw]
-    energy = tile_sums(base * base)
-    rho = np.empty((MAX_PERIOD, rows, cols))
-    for lag in range(1, MAX_PERIOD + 1):
-        shifted = gx[:, lag:lag + cols * tw]
-        rho[lag - 1] = tile_sums(base * shifted) / np.sqrt(
-            energy * tile_sums(shifted * shifted) + 1e-30)
-    lowest = np.minimum.accumulate(rho, axis=0)
-    peak = (rho[1:-1] >= rho[:-2]) & (rho[1:-1] >= rho[2:])
-    rise = np.where(peak, (rho[1:-1] - lowest[:-2]) / 2.0, 0.0)
-    score = np.clip(rise.max(axis=0), 0.0, 1.0)
-    return np.where(energy > 1e-6 * th * tw, score, 0.0)
-
-
-def periodic_fraction(image) -> float:
-    """The fraction of :func:`periodicity`'s tiles that score above ``PERIODIC_SCORE``
-    (0 for an image too small for one tile)."""
-    score = periodicity(image)
-    return float((score > PERIODIC_SCORE).mean()) if score.size else 0.0
-
-
 def model_health(result, d_max) -> dict:
     """``area`` (foreground fraction, cyclopean), ``jump`` (mean left-view jump over the
     foreground), ``crossing`` (fraction of the foreground where Theta_1 <= Theta_2),
@@ -281,7 +225,7 @@ def with_recovery(run, params, d_max, left=None, right=None):
     ``left`` (the left image, anything :func:`lss_kernels.io.read_image` reads) is
     periodic over at least ``PERIODIC_AREA`` of its tiles, the first uses ``params``
     changed by ``PERIODIC`` and the second ``params`` (at once, without a retry, when the
-    first finds no initial region: :class:`~lss_kernels.model.init.InitError`).  ``params``
+    first finds no initial region: :class:`~lss_kernels.start_types.InitError`).  ``params``
     None: the defaults; ``d_max``: the searched range (left-view pixels).  With ``left``
     and ``right``, the pair is first checked for swapped views and a search range that
     is too short (:mod:`lss_kernels.direction`, recorded as ``direction`` and ``range``): a

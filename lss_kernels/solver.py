@@ -19,6 +19,7 @@ re-initialisation and two per stop window for the stopping rule, and ``c_max + 2
 per sweep; nothing else leaves the device inside the loop.
 """
 import time
+import warnings
 
 import numpy as np
 import taichi as ti
@@ -235,20 +236,27 @@ class Solver:
     def _initial_mask(self, init, init_frame):
         """The initial foreground in the cyclopean frame
         (:func:`lss_kernels.model.start.initial_region`); also keeps it in the left view."""
+        from .periodicity import periodic_share
+        from .recovery import UnreliableStartWarning
         h = self.hierarchy
+        periodic = []             # the left image's periodic share, once a start needs it
 
         def find(start):
+            if not periodic:
+                periodic.append(periodic_share(self.left_image))
             region, frame = self.initialiser.find(start, h.consensus_mean, h.precision,
-                                                  left=self.left_image)
+                                                  periodic=periodic[0])
             return region, frame, self.initialiser.info, self.initialiser.grown
 
         mask, self.initial_left, self.init_info = initial_region(
             init, init_frame, self.shift, self.extent.image(h.consensus_mean),
             self.extent.image(h.precision), find, self.params.refine_ellipse)
+        if "warning" in self.init_info:
+            warnings.warn(UnreliableStartWarning(self.init_info["warning"]), stacklevel=4)
         return mask
 
     def _first_consensus(self):
-        """The consensus with no prior and no validity (Eqs. 4-6 brought down to pixels)."""
+        """The consensus (Eq. 7) of messages with no prior (Eq. 5), every patch valid."""
         self.messages.run(0.0, False, False)
         self.hierarchy.downward()
 

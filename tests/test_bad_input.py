@@ -210,10 +210,10 @@ def test_init_ellipse_outside_the_image(ellipse):
         _check(init=ellipse)
 
 
-@pytest.mark.parametrize("rx, ry", [(0.0, 5.0), (5.0, -1.0)])
-def test_init_ellipse_with_non_positive_radii(rx, ry):
-    with pytest.raises(ValueError, match=rf"^init: expected positive radii, got rx={rx:g}, "
-                                         rf"ry={ry:g}$"):
+@pytest.mark.parametrize("rx, ry", [(0.0, 5.0), (5.0, -1.0), (0.99, 5.0), (5.0, 1.4e-110)])
+def test_init_ellipse_with_radii_below_a_pixel(rx, ry):
+    with pytest.raises(ValueError, match=rf"^init: expected radii of at least 1 pixel, got "
+                                         rf"rx={rx:g}, ry={ry:g}$"):
         _check(init=(32.0, 24.0, rx, ry))
 
 
@@ -435,7 +435,7 @@ def _cli(capsys, tmp_path, args, ti_arch):
     ("init_malformed", r"^--init: expected ellipse:CX,CY,RX,RY with 4 numbers"),
     ("init_unknown", r"^--init: unknown kind 'disc'"),
     ("init_outside", r"^init: the ellipse centred at \(500, 24\) .* lies outside"),
-    ("init_radius", r"^init: expected positive radii, got rx=0, ry=8$"),
+    ("init_radius", r"^init: expected radii of at least 1 pixel, got rx=0, ry=8$"),
     ("init_mask_shape", r"^init: expected a mask of shape \(48, 64\), got shape \(20, 30\)$"),
     ("init_mask_empty", r"^init: the mask is empty"),
     ("no_dmax", r"^--dmax: required with LEFT RIGHT(; this pair's distinct matches reach "

@@ -45,3 +45,34 @@ def test_an_unknown_command_is_told_every_valid_one(capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "'sovle'" in err and all(c in err for c in ("solve", "demo", "eval", "bench", "batch"))
+
+
+def test_params_paper_is_the_papers_method_and_the_default_is_params():
+    """``--params paper`` on ``lss solve`` gives :meth:`Params.paper`, ``--param`` still
+    overrides it; without it, ``Params()``."""
+    from lss_kernels import Params
+    parser = cli.build_parser("solve")
+    args = parser.parse_args(["solve", "l.png", "r.png", "--out", "o"])
+    assert cli._params(args) == Params()
+    args = parser.parse_args(["solve", "l.png", "r.png", "--out", "o", "--params", "paper",
+                              "--param", "mu=3"])
+    assert cli._params(args) == Params.paper(mu=3.0)
+    with pytest.raises(SystemExit):
+        parser.parse_args(["solve", "l.png", "--out", "o", "--params", "fast"])
+
+
+def test_lss_eval_passes_params_paper_to_the_evaluation(monkeypatch, tmp_path):
+    from lss_kernels import Params
+    from lss_kernels.apps import evaluate
+    seen = {}
+
+    def run_eval(dataset_dir, **kwargs):
+        seen.update(kwargs)
+        (tmp_path / "table.md").write_text("")
+        return []
+
+    monkeypatch.setattr(evaluate, "run_eval", run_eval)
+    assert cli.main(["eval", "DIR", "--params", "paper", "--out", str(tmp_path)]) == 0
+    assert seen["params"] == Params.paper()
+    assert cli.main(["eval", "DIR", "--out", str(tmp_path)]) == 0
+    assert seen["params"] is None                      # run_eval's default: Params()

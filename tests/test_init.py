@@ -255,7 +255,8 @@ def test_auto_on_a_textured_scene_records_no_periodicity_and_does_not_warn(easy)
 def test_auto_on_a_striped_background_warns_that_its_start_may_be_wrong(fresh_taichi):
     """The stripes leave the first consensus ambiguous (stress scene ``periodic_bg_p6``:
     auto's start covers a sliver of the object): auto goes on, says so and records it."""
-    from lss_kernels.recovery import PERIODIC_AREA, UnreliableStartWarning
+    from lss_kernels.periodicity import PERIODIC_AREA
+    from lss_kernels.recovery import UnreliableStartWarning
     from lss_kernels.scenes import make_scene
     from lss_kernels.solver import Params, Solver
     scene = make_scene("easy", seed=1, texture_bg={"kind": "stripes", "period": 6.0})

@@ -96,14 +96,16 @@ def test_a_box_whose_centre_region_covers_too_little_of_it_starts_from_its_ellip
 
 def test_a_box_on_a_periodic_image_starts_from_its_ellipse(region):
     from lss_kernels.model.init import box_ellipse
-    from lss_kernels.recovery import PERIODIC_AREA, periodic_fraction
+    from lss_kernels.periodicity import PERIODIC_AREA, periodic_share
     _block_scene(region)
     x = np.arange(160)
     stripes = np.tile((128 + 100 * np.sin(2 * np.pi * x / 8))[None, :, None], (32, 1, 3))
-    assert periodic_fraction(stripes) >= PERIODIC_AREA
+    assert periodic_share(stripes) >= PERIODIC_AREA
     box = Box(16.0, 10.0, 30.0, 20.0)
-    start, frame = region._box(box, left=stripes)
+    start, frame = region._box(box, periodic=periodic_share(stripes))
     assert frame == "left" and start == box_ellipse(box)
     assert "periodic" in region.info["why"]
-    start, frame = region._box(box, left=np.zeros((32, 160, 3)))   # flat: not periodic
+    flat = periodic_share(np.zeros((32, 160, 3)))                   # flat: not periodic
+    assert flat == 0.0
+    start, frame = region._box(box, periodic=flat)
     assert frame == "cyclopean"

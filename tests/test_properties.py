@@ -11,7 +11,7 @@ import math
 import imageio.v3 as iio
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from lss_kernels import Params, solve
@@ -19,7 +19,7 @@ from lss_kernels.apps.cli import main
 from lss_kernels.io import read_image, read_pfm, write_pfm
 from lss_kernels.metrics import score_arrays
 from lss_kernels.scenes import make_scene
-from lss_kernels.validate import check_init, parse_init
+from lss_kernels.validate import MIN_RADIUS, check_init, parse_init
 
 H, W = 48, 64
 D_MAX = 14.0          # the tiny preset's d_max: one c_max for every solver run here
@@ -35,10 +35,13 @@ anything = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers
 # ------------------------------------------------------------------------------ boundary
 @FAST
 @given(cx=finite, cy=finite, rx=st.floats(-20, 80), ry=st.floats(-20, 80))
+@example(cx=63.0, cy=0.0, rx=1.4e-110, ry=5.0)     # a degenerate radius on the last column
+@example(cx=64.0, cy=0.0, rx=1.0, ry=1.0)          # the last column on the ellipse's rim
+@example(cx=-1.0, cy=-1.0, rx=1.0, ry=1.0)         # the corner pixel outside the rim
 def test_check_init_accepts_exactly_the_ellipses_that_cover_a_pixel(cx, cy, rx, ry):
     y, x = np.mgrid[0:H, 0:W]
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        covers = rx > 0 and ry > 0 and bool(
+        covers = rx >= MIN_RADIUS and ry >= MIN_RADIUS and bool(
             (((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1.0).any())
     try:
         out = check_init((cx, cy, rx, ry), (H, W))

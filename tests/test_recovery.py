@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lss_kernels import Params, recovery
+from lss_kernels import Params, periodicity, recovery
 from lss_kernels.recovery import collapse, model_health, with_recovery
 
 H, W = 20, 30
@@ -195,36 +195,47 @@ def autocorrelation_score(tile, lags):
 
 def test_periodicity_of_a_tile_follows_its_written_out_definition():
     rng = np.random.default_rng(3)
-    th, tw = recovery.TILE
-    tile = rng.random((th, tw + recovery.MAX_PERIOD + 1)) + stripes(9, (th, tw + 33))
-    score = recovery.periodicity(tile)
+    th, tw = periodicity.TILE
+    tile = rng.random((th, tw + periodicity.MAX_PERIOD + 1)) + stripes(9, (th, tw + 33))
+    score = periodicity.periodicity(tile)
     assert score.shape == (1, 1)
-    assert score[0, 0] == pytest.approx(autocorrelation_score(tile, recovery.MAX_PERIOD))
+    assert score[0, 0] == pytest.approx(autocorrelation_score(tile, periodicity.MAX_PERIOD))
 
 
 @pytest.mark.parametrize("period", [3, 6, 11, 24])
 def test_stripes_are_periodic_and_noise_is_not(period):
     rng = np.random.default_rng(period)
-    assert recovery.periodic_fraction(stripes(period)) == 1.0
+    assert periodicity.periodic_fraction(stripes(period)) == 1.0
     # sampled at whole pixels, stripes of 3 dip to only cos(2 pi / 3) = -0.5 at lag 1
-    assert recovery.periodicity(stripes(period)).min() > (0.74 if period == 3 else 0.9)
+    assert periodicity.periodicity(stripes(period)).min() > (0.74 if period == 3 else 0.9)
     noise = rng.random((64, 160, 3))
-    assert recovery.periodicity(noise).max() < 0.4
-    assert recovery.periodic_fraction(noise) == 0.0
+    assert periodicity.periodicity(noise).max() < 0.4
+    assert periodicity.periodic_fraction(noise) == 0.0
 
 
 def test_smooth_flat_and_small_images_are_not_periodic():
     y, x = np.mgrid[0:64, 0:160]
-    assert recovery.periodic_fraction(np.sin(x / 40.0) + y / 64.0) == 0.0   # no dip and rise
-    assert recovery.periodic_fraction(np.full((64, 160), 0.5)) == 0.0       # no gradient
-    assert recovery.periodic_fraction(stripes(6, (10, 40))) == 0.0          # no whole tile
+    assert periodicity.periodic_fraction(np.sin(x / 40.0) + y / 64.0) == 0.0   # no dip and rise
+    assert periodicity.periodic_fraction(np.full((64, 160), 0.5)) == 0.0       # no gradient
+    assert periodicity.periodic_fraction(stripes(6, (10, 40))) == 0.0          # no whole tile
 
 
 def test_the_periodic_fraction_counts_the_striped_tiles():
     rng = np.random.default_rng(0)
     image = rng.random((64, 160))
     image[:32] = stripes(7, (32, 160))            # 2 of 4 tile rows striped
-    assert recovery.periodic_fraction(image) == 0.5
+    assert periodicity.periodic_fraction(image) == 0.5
+
+
+def test_the_periodic_share_is_the_fraction_from_periodic_area_on_and_zero_below_it():
+    rng = np.random.default_rng(1)
+    image = rng.random((64 * 10, 160))
+    image[:64] = stripes(7, (64, 160))            # 4 of 40 tile rows striped: 0.1
+    assert periodicity.periodic_fraction(image) == pytest.approx(0.1)
+    assert periodicity.periodic_share(image) == pytest.approx(0.1)
+    image[16:64] = rng.random((48, 160))          # 1 of 40: below PERIODIC_AREA (0.05)
+    assert periodicity.periodic_fraction(image) == pytest.approx(0.025)
+    assert periodicity.periodic_share(image) == 0.0
 
 
 def test_a_periodic_pair_is_solved_with_the_recovery_unrefined_first_and_the_defaults_second():

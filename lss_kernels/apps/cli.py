@@ -59,6 +59,9 @@ def _add_solve(subparsers):
                         f"device answers, else the CPU)")
     p.add_argument("--threads", type=int, metavar="N", help="CPU threads (default: all)")
     p.add_argument("--max-iterations", type=int, metavar="N", help="iteration cap")
+    p.add_argument("--params", choices=("default", "paper"), default="default",
+                   help="the parameter set: default (recommended) or paper (the paper's "
+                        "method and nothing beyond it, Params.paper)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="override a solver parameter (repeatable), e.g. --param mu=3")
     p.add_argument("--no-refine", action="store_true",
@@ -73,7 +76,7 @@ def _add_solve(subparsers):
 
 def _params(args):
     from ..params import Params
-    defaults = Params()
+    defaults = Params.paper() if getattr(args, "params", "default") == "paper" else Params()
     changes = {}
     for item in args.param:
         name, sep, value = item.partition("=")

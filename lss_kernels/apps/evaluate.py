@@ -77,7 +77,7 @@ def scene_start(scene: io.Scene, init=None):
     """``(init, frame)`` for a scene: its own ellipse (or ``auto`` without one) when ``init``
     is None; ``"auto"``; ``"gt-point"`` / ``"gt-box"``: a point at the centroid / the bounding
     box of the ground-truth foreground (a click, a detector), to measure those starts."""
-    from ..model.init import Box, Point
+    from ..start_types import Box, Point
     from .jobs import scene_init
     if init in ("gt-point", "gt-box"):
         if scene.fg_left is None or not scene.fg_left.any():
@@ -146,7 +146,7 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
     """Disparity and occlusion (left view) of one method on one scene, extra facts, and the
     seconds spent on the trace."""
     if method == "lss":
-        from ..model.init import InitError
+        from ..start_types import InitError
         from ..recovery import named_warnings, with_recovery
         from .jobs import sweep_summary
 
@@ -273,7 +273,7 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
     arch : str
         Taichi arch for ``lss`` (see :func:`lss_kernels.kernels.backend.init`).
     params : lss_kernels.Params or None
-        Solver parameters for ``lss`` (``None``: the paper's defaults).
+        Solver parameters for ``lss`` (``None``: ``Params()``, the recommended defaults).
     progress : bool
         Print one line per finished (scene, method) to stderr.
     trace : bool
@@ -441,6 +441,9 @@ def add_cli(subparsers) -> None:
                    help="start lss from auto, or from a point at the centroid / the bounding "
                         "box of the true foreground, instead of each scene's ellipse (use its "
                         "own --out)")
+    p.add_argument("--params", choices=("default", "paper"), default="default",
+                   help="lss's parameter set: default (recommended) or paper (the paper's "
+                        "method and nothing beyond it, Params.paper; use its own --out)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=main_eval)
 
@@ -448,11 +451,14 @@ def add_cli(subparsers) -> None:
 def main_eval(args) -> int:
     """Handler of ``lss eval``: 0 on success, 2 with a one-line message on a usage error
     (unknown method, missing OpenCV, no such folder, no scenes)."""
+    from ..params import Params
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    params = Params.paper() if args.params == "paper" else None
     try:
         rows = run_eval(args.dataset_dir, methods=methods, out=args.out, jobs=args.jobs,
-                        force=args.force, arch=args.arch, progress=not args.quiet,
-                        trace=args.trace, scheduler=args.scheduler, init=args.init)
+                        force=args.force, arch=args.arch, params=params,
+                        progress=not args.quiet, trace=args.trace, scheduler=args.scheduler,
+                        init=args.init)
     except (ValueError, FileNotFoundError, ImportError) as error:
         print(f"lss eval: error: {error}", file=sys.stderr)
         return 2

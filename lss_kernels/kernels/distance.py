@@ -34,7 +34,8 @@ class DistanceTransform:
         axes = [n for n in self.shape if n > 1] or [1]
         # a line of length n takes n + 1 elements of each buffer (z has the extra one); a pass
         # takes as many lines as fit, so a short axis runs in few launches, not one launch per
-        # ``max_scratch / longest`` lines (B_occ's c axis at 580x340, c_max 25: 290 -> 13)
+        # ``max_scratch / longest`` lines (B_occ's c axis at 580x340, c_max 25: 13 launches,
+        # not 290)
         need = max((total // n) * (n + 1) for n in axes)
         self.size = max(min(int(max_scratch), need), max(axes) + 1)
         self.v = ti.field(ti.i32)

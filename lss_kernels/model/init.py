@@ -2,7 +2,7 @@
 
 The paper starts phi from an ellipse placed by hand.  These initialisations find the object
 from the method's own machinery instead: the first consensus of the cooperative hierarchy
-(Eqs. 4-7 with no prior and no validity) gives a disparity d-bar per cyclopean pixel with its
+(Eqs. 5 and 7 with no prior, every patch valid) gives a disparity d-bar per cyclopean pixel with its
 precision; pixels of zero precision have no d-bar.  Per pixel, in kernels, d-bar is first
 median-filtered (``MEDIAN`` squared, as phi is after each Eq. 2 step), which fills the gaps
 and removes stray matches.  Then:
@@ -21,7 +21,7 @@ and removes stray matches.  Then:
   (``BOX_SPILL``) when the centre has no confident match, when its region in the box is
   smaller than ``MIN_AREA`` of the image or ``MIN_BOX_COVER`` of the box (the centre is off
   the object, as in the box of an L), or when the left image is periodic
-  (:func:`lss_kernels.recovery.periodic_fraction` at least ``PERIODIC_AREA``);
+  (:mod:`lss_kernels.periodicity`, which the caller applies);
 * ``"auto"``: the near pixels that also stand more than ``CONTRAST`` above the background
   surface, a quadratic fitted to d-bar robustly (:func:`background_fit`, a stand-in for
   the model's Theta_2 before the object is known): a floor or a wall whose depth bulges
@@ -40,29 +40,28 @@ and removes stray matches.  Then:
   is then the object, when it holds ``NEST_SHARE`` of it (a large object's bulge above
   its own quadratic holds less; ``docs/design.md``), and regrows over pixels ``CONTRAST``
   above that fit.  On a periodic left image ``auto`` has no ellipse to fall back on: it
-  goes on and warns :class:`~lss_kernels.recovery.UnreliableStartWarning`.
+  goes on, and the solver warns :class:`~lss_kernels.recovery.UnreliableStartWarning`.
 
 A found region starts phi widened by ``SPILL`` pixels: a start that spills over the object is
 recovered by the evolution, one that covers only part of it is not always (paper15 scene 4:
 Theta_2 bulges over the uncovered part).  Except, for a point's and a box's region, towards
 the left (``SPILL_LEFT``): the object's left edge is where the background is seen by the
 left camera only, and a start that spills over it can carry the foreground on over the
-background (paper15 scene 2: F1 0.18 widened all round, 0.67 not to the left).
+background (paper15 scene 2's tall pin spreads over the wall beside it).
 
 Every choice is reported in :attr:`InitialRegion.info`.
 """
-from dataclasses import dataclass
 import math
 
 import numpy as np
 import taichi as ti
 
 from ..kernels.median import Assign, MedianFilter
+from ..start_types import AUTO, Box, InitError, Point
 
-__all__ = ["Point", "Box", "AUTO", "InitialRegion", "InitError", "BOX_SPILL", "MIN_BOX_COVER",
-           "SPILL", "SPILL_LEFT", "background_fit", "shift_columns"]
+__all__ = ["InitialRegion", "BOX_SPILL", "MIN_BOX_COVER", "SPILL", "SPILL_LEFT",
+           "background_fit", "shift_columns"]
 
-AUTO = "auto"
 BOX_SPILL = 1.0          # a box's ellipse radii over the box's half sides
 MEDIAN = 7               # d-bar's median window, pixels
 CONTRAST = 1.0           # near-pixel contrast, cyclopean pixels
@@ -84,26 +83,6 @@ NEST_CONTRAST = 2.0      # ... for pixels this far above its own quadratic (cycl
 NEST_SHARE = 0.05        # ... forming a candidate of at least this fraction of it
 MAX_ROUNDS = 4096        # propagation launches before a region is taken as it stands
 
-
-class InitError(ValueError):
-    """No foreground could be found from the given initialisation."""
-
-
-@dataclass(frozen=True)
-class Point:
-    """A left-view pixel on the object (a click): ``x`` to the right, ``y`` down, 0-based."""
-    x: float
-    y: float
-
-
-@dataclass(frozen=True)
-class Box:
-    """A left-view box around the object (a detector's output): corners ``(x0, y0)`` and
-    ``(x1, y1)``, 0-based pixels, ``x0 < x1``, ``y0 < y1``."""
-    x0: float
-    y0: float
-    x1: float
-    y1: float
 
 
 def box_ellipse(box, spill: float = BOX_SPILL) -> tuple:
@@ -362,49 +341,40 @@ class InitialRegion:
                 return rounds
         return MAX_ROUNDS
 
-    def find(self, init, mean, precision, left=None) -> tuple:
+    def find(self, init, mean, precision, periodic: float = 0.0) -> tuple:
         """The initial region for ``init`` (``"auto"``, :class:`Point` or :class:`Box`) as
         ``(ellipse, "left")`` for a box whose centre gives no region, else
         ``(mask, "cyclopean")``, an ``(H, W)`` boolean
         mask, for :class:`~lss_kernels.Solver`; fills :attr:`info`.
 
-        ``mean`` and ``precision`` are the first consensus (cyclopean pixels); ``left`` is the
-        left image (a box's start ignores the consensus on a periodic one; None: not tested)."""
+        ``mean`` and ``precision`` are the first consensus (cyclopean pixels); ``periodic``
+        the share of the left image's tiles that are periodic when the image counts as
+        periodic (:mod:`lss_kernels.periodicity`), else 0: a box's start then ignores the
+        consensus, and ``auto`` records a warning in :attr:`info` (the caller issues it)."""
         self.load(mean, precision)
         self.smooth()
         self.mark_near(max(int(WINDOW * self.W), 1), CONTRAST)
         if isinstance(init, Box):
-            return self._box(init, left)
+            return self._box(init, periodic)
         mask = self._point(init) if isinstance(init, Point) else self._auto()
         self.info["area"] = int(mask.sum())
-        if init == AUTO and left is not None:
-            self._check_periodic(left)
+        if init == AUTO:
+            self.info["periodic"] = periodic
+            if periodic > 0:
+                self.info["warning"] = (
+                    f"init auto: the left image is periodic ({periodic:.0%} of its tiles), so "
+                    f"the first consensus that the start is found from is ambiguous and the "
+                    f"start may be the wrong region; check overlay.png, or start from a "
+                    f"point, a box or an ellipse")
         return mask, "cyclopean"
 
-    def _check_periodic(self, left):
-        """Record the left image's periodic fraction in :attr:`info`; on a periodic image
-        warn :class:`~lss_kernels.recovery.UnreliableStartWarning` (``auto`` fails on 3 of
-        the 8 striped stress scenes of seeds 0 and 2)."""
-        import warnings
-        from ..recovery import PERIODIC_AREA, UnreliableStartWarning, periodic_fraction
-        periodic = periodic_fraction(left)
-        self.info["periodic"] = periodic
-        if periodic >= PERIODIC_AREA:
-            self.info["warning"] = (
-                f"init auto: the left image is periodic ({periodic:.0%} of its tiles), so "
-                f"the first consensus that the start is found from is ambiguous and the "
-                f"start may be the wrong region; check overlay.png, or start from a point, "
-                f"a box or an ellipse")
-            warnings.warn(UnreliableStartWarning(self.info["warning"]), stacklevel=4)
-
-    def _box(self, box, left=None):
-        """The region of the point at the box's centre, cut to the box; else its ellipse."""
-        from ..recovery import PERIODIC_AREA, periodic_fraction
+    def _box(self, box, periodic: float = 0.0):
+        """The region of the point at the box's centre, cut to the box; else its ellipse
+        (always on a periodic left image: ``periodic`` > 0, as for :meth:`find`)."""
         facts = {"kind": "box", "box": [box.x0, box.y0, box.x1, box.y1]}
         centre = Point((box.x0 + box.x1) / 2.0, (box.y0 + box.y1) / 2.0)
-        periodic = periodic_fraction(left) if left is not None else 0.0
         mask = None
-        if periodic >= PERIODIC_AREA:
+        if periodic > 0:
             why = (f"the left image is periodic ({periodic:.0%} of its tiles): the first "
                    f"consensus is not trusted")
         else:

@@ -23,8 +23,7 @@ camera, hidden from the right) when the right camera, at x - d, sees the foregro
 with two layers: the foreground is always in front).  The foreground point it would see lies
 at x_l in the left view, and the left pixel nearest x_l is asked whether it is foreground: so
 the occluded strip is as wide as the rendered jump in whole pixels, and a whole-pixel jump
-does not lose or gain a pixel to float rounding (a 3 px jump on a rendered probe: occlusion
-F1 0.66 -> 0.92).
+does not lose or gain a pixel to float rounding.
 
 The strips measured against the refined background (:meth:`OcclusionGeometry.measure_strips`,
 after :mod:`lss_kernels.model.refine`): a strip is as wide as the jump from the foreground at

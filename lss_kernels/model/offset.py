@@ -1,10 +1,11 @@
 """Where the disparity grid starts: at 2 px as in the authors' release, or at 0 px for a pair
 whose background lies farther.
 
-The cost volumes sample integer cyclopean disparities ``c = 1 .. c_max`` (Sec. 4; left-view
-disparity ``2c``), so the smallest disparity the model can hold is 2 px.  A background
-farther than that is fitted at 2 px, with its occluded strip too short, and one at 3 px lies
-within a plane of the floor, where a message has no plane below to be refined with.
+The cost volumes sample integer cyclopean disparities ``c = 1 .. c_max`` (the authors'
+release; left-view disparity ``2c``), so the smallest disparity the model can hold is 2 px.
+A background farther than that is fitted at 2 px, with its occluded strip too short, and one
+at 3 px lies within a plane of the floor, where a message has no plane below to be refined
+with.
 
 For such a pair the solver moves each view ``SHIFT`` pixels apart before the costs,
 ``left'(x) = left(x - SHIFT)`` and ``right'(x) = right(x + SHIFT)``: a user disparity ``d`` is
@@ -20,12 +21,9 @@ with no prior, the map the automatic start reads too) puts at least ``FLOOR_SHAR
 confident pixels near the grid's floor (below ``FLOOR_C``: 4 px).  Such a pair is loaded
 again into fields of one plane more, ``c_max = ceil(d_max / 2) + 1``, and searched over
 ``0 .. 2 ceil(d_max / 2)``; every other pair keeps the authors' grid and fields, bit for
-bit.  (Fields of one plane more for every pair would move every pair's first consensus a
-little, through the levels' normalisation and the messages' sigma, and flip scenes on a
-knife edge; moving every pair would cost paper15 0.01 of mean F1: ``docs/design.md``.)
-Measured (``lss eval``): on 16 rendered 320x240 probes with the background at 0-3 px, mean
-occlusion F1 0.86 -> 0.96 (SGBM 0.93), the lowest 0.00 -> 0.89, bad-4.0 3.3 -> 0.1 %; the
-floor shares there 0.72-0.82, on paper15 0.00-0.06, where nothing moves.
+bit: fields of one plane more would move every pair's first consensus a little, through the
+levels' min-max normalisation and the messages' sigma.  The floor share of paper15's pairs is
+0.00-0.06 (none moves); of rendered pairs with the background at 0-3 px, 0.72-0.82.
 """
 import numpy as np
 
@@ -82,9 +80,9 @@ def to_user_left(plane: np.ndarray, shift: int) -> np.ndarray:
 
 
 def to_model_start(init, shift: int):
-    """A :class:`~lss_kernels.model.init.Point` or :class:`~lss_kernels.model.init.Box` of the
-    user's left view in the model's; ``"auto"`` as it is."""
-    from .init import Box, Point
+    """A :class:`~lss_kernels.start_types.Point` or :class:`~lss_kernels.start_types.Box` of
+    the user's left view in the model's; ``"auto"`` as it is."""
+    from ..start_types import Box, Point
     if isinstance(init, Point):
         return Point(init.x + shift, init.y)
     if isinstance(init, Box):

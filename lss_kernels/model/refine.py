@@ -1,7 +1,7 @@
-"""Surface plus parallax inside each layer: the left-view disparity of Sec. 4's two quadratics
-refined by a residual that each layer estimates from its own pixels.
+"""Surface plus parallax inside each layer: the left-view disparity of the two quadratics
+(Sec. 2) refined by a residual that each layer estimates from its own pixels.
 
-The paper (Sec. 4, Sec. 6) notes that one quadratic per layer cannot describe every object or
+The paper (Sec. 4) notes that one quadratic per layer cannot describe every object or
 background, and points to a surface-plus-parallax model.  Here each layer's disparity is its
 rendered surface S (the z-buffered ``2 Theta_j`` of :mod:`lss_kernels.model.occlusion`) plus
 a smooth residual r, found after the alternation (the occlusion geometry, delta_theta, keeps

@@ -11,7 +11,8 @@ import time
 
 import numpy as np
 
-from .init import CONTRAST, Box, shift_columns
+from ..start_types import Box
+from .init import CONTRAST, shift_columns
 from .offset import info_to_user, to_model_left, to_model_start, to_user_left
 
 __all__ = ["cyclopean_start", "ellipse_mask", "foreground_shift", "front_contrast",
@@ -90,7 +91,7 @@ def region_in_ellipse(ellipse, frame: str, mean: np.ndarray, precision: np.ndarr
     """``Params.refine_ellipse``: the start that an ellipse ``(cx, cy, rx, ry)`` (in the
     model's left view or the cyclopean frame, ``frame``) stands for, as ``(start,
     start_frame, report)``: the object under its centre cut to the box around it, as a
-    :class:`~lss_kernels.model.init.Box` starts (``(mask, "cyclopean", info)``), or
+    :class:`~lss_kernels.start_types.Box` starts (``(mask, "cyclopean", info)``), or
     ``(ellipse, frame, why)`` when the box finds no object, or finds one that is not
     ``CONTRAST`` in front of the ring around it (:func:`front_contrast`, less the object's
     own pixels beyond the box: in the notch of an L the centre lies on the background).

@@ -8,8 +8,7 @@ weight (and, from the second iteration on, their messages echo the ``beta |c - D
 the fit is then decided by the few confident pixels outside the boundary -- the part of the
 object that the start does not cover, and the halo where large patches straddle it -- and
 Theta_2 lands on the object.  The two layers coincide, nothing drives phi, and the
-foreground vanishes (``python -m lss_kernels.stress OUT --random 24``, seeds 1 and 2: of their
-ten scenes with such a background, six are lost or bent, four of them at occlusion F1 0).
+foreground vanishes.
 
 The signal is there when summed over the whole background: the mean matching cost of the
 visible background, as a function of one disparity, dips by about 6 % at the true one.  So
@@ -23,16 +22,13 @@ standardised cost is below that of the fitted Theta_2 by more than ``Params.back
 Theta_2 becomes that plane (its disparity refined to the vertex of the parabola through the
 best candidate and its neighbours), provided that it is a distinct dip of the swept curve
 (``WIDTH``): a slanted or curved background, whose pixels dip at many disparities, sweeps to a
-broad bowl whose lowest plane explains none of it (paper15 scene 2, a wall spanning 60 px of
-disparity: the plane at the range's end, F1 0.66 -> 0.46), and is left to the fit.  On a
-textured fronto-parallel background the plane can win too, where it explains the background
-better than the fitted quadratic; the paper's scenes keep their F1 (``docs/design.md``).
+broad bowl whose lowest plane explains none of it (a wall spanning 60 px of disparity would
+get the plane at the range's end), and is left to the fit.  On a textured fronto-parallel
+background the plane can win too, where it explains the background better than the fitted
+quadratic.  A dark background that is curved becomes a plane.
 
 The sweep runs after the fit in each of the first ``reinit_every`` iterations (while the
-first consensus' pull on Theta_2 is undone) and then at every re-initialisation.  On the
-six scenes above (``lss eval``, with ``background_sweep=0`` -> with it): 0.00 -> 0.86,
-0.96, 0.98 and 0.96; 0.77 -> 0.91; 0.48 -> 0.94; a dark background that is curved becomes
-a plane (stress ``curved_ball_dark``: 0.93 by the recovery's second solve -> 0.86).
+first consensus' pull on Theta_2 is undone) and then at every re-initialisation.
 
 Frames and units are the solver's: cyclopean planes, ``c = 1 .. c_max`` (volume index
 ``k = c - 1``), Theta in cyclopean units.
