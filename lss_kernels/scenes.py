@@ -185,10 +185,15 @@ def _source_x(theta: np.ndarray, xr, y):
         return 2.0 * big_c / (big_b + np.sqrt(big_b * big_b - 4.0 * a * big_c))
 
 
-def _inside(ellipse, x, y, outline: str = "ellipse"):
-    """Whether the left-view points ``(x, y)`` lie inside the foreground (NaN: outside)."""
+def _inside(ellipse, x, y, outline: str = "ellipse", angle: float = 0.0):
+    """Whether the left-view points ``(x, y)`` lie inside an outline (NaN: outside): its box
+    ``ellipse = (cx, cy, rx, ry)`` turned by ``angle`` degrees about its centre, from the
+    x axis toward the y axis (0: axis-aligned, and then ``(u, v)`` are exactly the unturned
+    ones)."""
     cx, cy, rx, ry = ellipse
-    u, v = (x - cx) / rx, (y - cy) / ry
+    cos, sin = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+    u = (cos * (x - cx) + sin * (y - cy)) / rx
+    v = (cos * (y - cy) - sin * (x - cx)) / ry
     if outline == "ellipse":
         return u ** 2 + v ** 2 <= 1.0
     box = (np.abs(u) <= 1.0) & (np.abs(v) <= 1.0)
@@ -201,32 +206,44 @@ def _inside(ellipse, x, y, outline: str = "ellipse"):
                               + 0.1 * np.cos(5 * angle + 2.0)) / 1.3
 
 
-def _check(spec: SceneSpec, surfaces: list, ellipse, pad: int) -> None:
-    """The scene must be a valid two-layer scene on the rendered domain: ``surfaces`` are
-    the background, the props and the object (:func:`_geometry`)."""
+def _check_image(spec) -> None:
+    """The checks of a :class:`SceneSpec` or :class:`MultiSpec` that do not depend on its
+    surfaces: the size, ``d_max_step`` and ``noise``."""
     if spec.width < 8 or spec.height < 8:
         raise ValueError(f"width, height: expected at least 8 pixels, got {spec.width}x{spec.height}")
-    if ellipse[2] <= 0 or ellipse[3] <= 0:
-        raise ValueError(f"ellipse: expected radii > 0, got {ellipse}")
-    if spec.outline not in OUTLINES:
-        raise ValueError(f"outline: unknown {spec.outline!r}; valid: {', '.join(OUTLINES)}")
     if int(spec.d_max_step) != spec.d_max_step or spec.d_max_step < 1:
         raise ValueError(f"d_max_step: expected a positive integer, got {spec.d_max_step}")
     if not 0.0 <= spec.noise <= 1.0:
         raise ValueError(f"noise: expected a standard deviation in [0, 1], got {spec.noise}")
-    names = ["d_bg", *(f"props[{i}]: d" for i in range(len(spec.props))), "d_fg"]
-    y, x = np.mgrid[0:spec.height, -pad:spec.width + pad].astype(np.float64)
+
+
+def _check_surfaces(surfaces: list, names: list, width: int, height: int, pad: int) -> None:
+    """Each surface must have a disparity >= 0 in the image (a whole plane other than the
+    background only where it is seen, that is nearer than the rest) and must not fold in the
+    right view: ``d/dx < 0.9`` over the rendered domain (``pad`` columns either side)."""
+    y, x = np.mgrid[0:height, -pad:width + pad].astype(np.float64)
     for i, (surface, name) in enumerate(zip(surfaces, names)):
         d = _disparity(surface.theta, x, y)
         dx = 2 * surface.theta[0] * x + surface.theta[1] * y + surface.theta[3]
-        # a whole-plane prop is only seen where it is nearer than the background
         if (i == 0 or surface.box is not None) and d[:, pad:-pad].min() < 0:
             raise ValueError(f"{name}: disparity must be >= 0 in the image, min is "
                              f"{d[:, pad:-pad].min():.3g}")
         if dx.max() >= 0.9:
             raise ValueError(f"{name}: d/dx must stay below 0.9 (the surface must not fold in "
                              f"the right view), max is {dx.max():.3g}")
-    y, x = y[:, pad:-pad], x[:, pad:-pad]
+
+
+def _check(spec: SceneSpec, surfaces: list, ellipse, pad: int) -> None:
+    """The scene must be a valid two-layer scene on the rendered domain: ``surfaces`` are
+    the background, the props and the object (:func:`_geometry`)."""
+    _check_image(spec)
+    if ellipse[2] <= 0 or ellipse[3] <= 0:
+        raise ValueError(f"ellipse: expected radii > 0, got {ellipse}")
+    if spec.outline not in OUTLINES:
+        raise ValueError(f"outline: unknown {spec.outline!r}; valid: {', '.join(OUTLINES)}")
+    names = ["d_bg", *(f"props[{i}]: d" for i in range(len(spec.props))), "d_fg"]
+    _check_surfaces(surfaces, names, spec.width, spec.height, pad)
+    y, x = np.mgrid[0:spec.height, 0:spec.width].astype(np.float64)
     inside = _inside(ellipse, x, y, spec.outline)
     if not inside.any():
         raise ValueError(f"ellipse: {ellipse} covers no pixel of the {spec.width}x{spec.height} image")
@@ -251,43 +268,56 @@ def _check(spec: SceneSpec, surfaces: list, ellipse, pad: int) -> None:
 @dataclass(frozen=True)
 class _Surface:
     """A rendered surface: disparity coefficients on U, and the outline that bounds it in
-    surface (left-view) coordinates (``box`` None: the whole plane)."""
+    surface (left-view) coordinates (``box`` None: the whole plane), turned by ``angle``
+    degrees about the box's centre."""
 
     theta: np.ndarray
     box: tuple | None = None
     outline: str = "rectangle"
+    angle: float = 0.0
 
     def covers(self, x, y):
         """Whether the surface holds the points ``(x, y)`` (NaN: a ray that misses it)."""
-        return np.isfinite(x) if self.box is None else _inside(self.box, x, y, self.outline)
+        return np.isfinite(x) if self.box is None else _inside(self.box, x, y, self.outline,
+                                                               self.angle)
 
 
-_PROP_KEYS = ("d", "box", "outline", "texture")
+_SURFACE_KEYS = ("d", "box", "outline", "angle", "texture", "name")
 
 
-def _props(spec: SceneSpec) -> list:
-    """The :class:`_Surface` of each of ``spec.props``, checked."""
+def _surfaces(items, what: str) -> list:
+    """The :class:`_Surface` of each dict of ``items`` (``SceneSpec.props`` or
+    ``MultiSpec.objects``, named ``what`` in errors), checked."""
     surfaces = []
-    for i, prop in enumerate(spec.props):
-        name = f"props[{i}]"
-        if not isinstance(prop, dict) or "d" not in prop:
-            raise ValueError(f"{name}: expected a dict with 'd' and any of 'box', 'outline', "
-                             f"'texture', got {prop!r}")
-        unknown = sorted(set(prop) - set(_PROP_KEYS))
+    for i, item in enumerate(items):
+        name = f"{what}[{i}]"
+        if not isinstance(item, dict) or "d" not in item:
+            raise ValueError(f"{name}: expected a dict with 'd' and any of "
+                             f"{', '.join(repr(k) for k in _SURFACE_KEYS[1:])}, got {item!r}")
+        unknown = sorted(set(item) - set(_SURFACE_KEYS))
         if unknown:
             raise ValueError(f"{name}: unknown key(s) {', '.join(unknown)}; valid: "
-                             f"{', '.join(_PROP_KEYS)}")
-        box = prop.get("box")
+                             f"{', '.join(_SURFACE_KEYS)}")
+        box = item.get("box")
         if box is not None:
             box = tuple(float(v) for v in box)
             if len(box) != 4 or not box[2] > 0 or not box[3] > 0:
                 raise ValueError(f"{name}: box: expected (cx, cy, rx, ry) with radii > 0, "
-                                 f"got {prop['box']!r}")
-        outline = prop.get("outline", "rectangle")
+                                 f"got {item['box']!r}")
+        outline = item.get("outline", "rectangle")
         if outline not in OUTLINES:
             raise ValueError(f"{name}: outline: unknown {outline!r}; valid: {', '.join(OUTLINES)}")
-        surfaces.append(_Surface(_theta(prop["d"], f"{name}: d"), box, outline))
+        angle = item.get("angle", 0.0)
+        if not isinstance(angle, (int, float)) or not math.isfinite(angle):
+            raise ValueError(f"{name}: angle: expected a finite number of degrees, got {angle!r}")
+        surfaces.append(_Surface(_theta(item["d"], f"{name}: d"), box, outline, float(angle)))
     return surfaces
+
+
+def _pad(surfaces: list, width: int, height: int) -> int:
+    """Columns rendered beyond each side of the image: the largest |disparity| + 4."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    return int(math.ceil(max(np.abs(_disparity(s.theta, x, y)).max() for s in surfaces))) + 4
 
 
 def _geometry(spec: SceneSpec) -> tuple:
@@ -296,10 +326,9 @@ def _geometry(spec: SceneSpec) -> tuple:
     w, h = int(spec.width), int(spec.height)
     ellipse = tuple(float(v) for v in (spec.ellipse if spec.ellipse is not None
                                        else (w / 2, h / 2, 0.25 * w, 0.29 * h)))
-    surfaces = [_Surface(_theta(spec.d_bg, "d_bg")), *_props(spec),
+    surfaces = [_Surface(_theta(spec.d_bg, "d_bg")), *_surfaces(spec.props, "props"),
                 _Surface(_theta(spec.d_fg, "d_fg"), ellipse, spec.outline)]
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-    pad = int(math.ceil(max(np.abs(_disparity(s.theta, x, y)).max() for s in surfaces))) + 4
+    pad = _pad(surfaces, w, h)
     _check(spec, surfaces, ellipse, pad)
     return surfaces, ellipse, pad
 
@@ -326,10 +355,48 @@ def _paint(textures: list, index, xs, y):
     return colour
 
 
+def _render(surfaces: list, textures: list, width: int, height: int) -> tuple:
+    """Ray cast both views over ``surfaces`` (the background first, which must cover the
+    right view) painted with ``textures``.
+
+    Returns ``(left, right, seen, d_left, occ)``: the noise-free images (float64, (H, W, 3)),
+    the index of the surface each left pixel sees, its disparity, and the occlusion: the
+    left pixel's point projects outside the right image, or another surface is nearer on its
+    right-view ray."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    # Left view: the nearest surface on the pixel's own ray.
+    seen, _, d_left = _nearest(surfaces, y, lambda surface: x)
+    left = _paint(textures, seen, x, y)
+
+    # Right view: on each ray, the point of each surface that projects to it (the root of
+    # x - d(x, y) = xr); the nearest one wins.
+    if np.isnan(_source_x(surfaces[0].theta, x, y)).any():
+        raise ValueError("d_bg: the background does not cover the right view; reduce its "
+                         "curvature")
+    seen_right, xs, _ = _nearest(surfaces, y, lambda surface: _source_x(surface.theta, x, y))
+    right = _paint(textures, seen_right, xs, y)
+
+    xr = x - d_left
+    seen_there, _, d_there = _nearest(surfaces, y,
+                                      lambda surface: _source_x(surface.theta, xr, y))
+    occ = (xr < -0.5) | ((seen_there != seen) & (d_there > d_left))
+    return left, right, seen, d_left, occ
+
+
 def check_scene(**params) -> None:
     """Raise ``ValueError`` if :func:`make_scene` ``(None, **params)`` would, without
     rendering (the geometry of :class:`SceneSpec` keywords)."""
     _geometry(replace(SceneSpec(), **params))
+
+
+def _spec(cls, params: dict, function: str, extra: str = ""):
+    """``cls(**params)`` after checking that every key is one of its fields."""
+    names = {f.name for f in fields(cls)}
+    unknown = sorted(set(params) - names)
+    if unknown:
+        raise ValueError(f"{function}: unknown parameter(s) {', '.join(unknown)}; "
+                         f"valid: {extra}{', '.join(sorted(names))}")
+    return cls(**params)
 
 
 def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene:
@@ -358,16 +425,10 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
     """
     if preset is not None and preset not in PRESETS:
         raise ValueError(f"preset: unknown {preset!r}; valid: {', '.join(PRESETS)}")
-    names = {f.name for f in fields(SceneSpec)}
-    unknown = sorted(set(params) - names)
-    if unknown:
-        raise ValueError(f"make_scene: unknown parameter(s) {', '.join(unknown)}; "
-                         f"valid: seed, {', '.join(sorted(names))}")
-    spec = replace(SceneSpec(**PRESETS.get(preset, {})), **params)
+    spec = _spec(SceneSpec, {**PRESETS.get(preset, {}), **params}, "make_scene", "seed, ")
     w, h = int(spec.width), int(spec.height)
     surfaces, ellipse, pad = _geometry(spec)
     theta_bg, theta_fg = surfaces[0].theta, surfaces[-1].theta
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
 
     rng = np.random.default_rng(seed)
     box = (-pad, -1.0, w + pad, h + 1.0)
@@ -376,27 +437,8 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
     textures = [tex_bg, *(make_texture(rng, prop.get("texture"), spec.texture_cells, box,
                                        f"props[{i}]: texture")
                           for i, prop in enumerate(spec.props)), tex_fg]
-    on_object = len(surfaces) - 1
-
-    # Left view: the nearest surface on the pixel's own ray.
-    seen, _, d_left = _nearest(surfaces, y, lambda surface: x)
-    fg = seen == on_object
-    left = _paint(textures, seen, x, y)
-
-    # Right view: on each ray, the point of each surface that projects to it (the root of
-    # x - d(x, y) = xr); the nearest one wins.
-    if np.isnan(_source_x(theta_bg, x, y)).any():
-        raise ValueError("d_bg: the background does not cover the right view; reduce its "
-                         "curvature")
-    seen_right, xs, _ = _nearest(surfaces, y, lambda surface: _source_x(surface.theta, x, y))
-    right = _paint(textures, seen_right, xs, y)
-
-    # Occlusion: the left pixel's point projects outside the right image, or another surface
-    # is nearer on its right-view ray.
-    xr = x - d_left
-    seen_there, _, d_there = _nearest(surfaces, y,
-                                      lambda surface: _source_x(surface.theta, xr, y))
-    occ = (xr < -0.5) | ((seen_there != seen) & (d_there > d_left))
+    left, right, seen, d_left, occ = _render(surfaces, textures, w, h)
+    fg = seen == len(surfaces) - 1
 
     left, right = (_finish(img, spec, rng) for img in (left, right))
     roi_fg, roi_bg = band_from_foreground(fg, spec.band_radius)
