@@ -39,11 +39,12 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 
 from .io import Scene, save_scene
-from .metrics import BAND_RADIUS, band_from_foreground, boundary_from_foreground
+from .metrics import BAND_RADIUS, _dilate_rows, band_from_foreground, boundary_from_foreground
 from .textures import TEXTURES, make_texture
 
-__all__ = ["OUTLINES", "PRESETS", "TEXTURES", "SceneSpec", "check_scene",
-           "disparity_coefficients", "make_scene", "write_scene"]
+__all__ = ["OUTLINES", "PRESETS", "TEXTURES", "MultiSpec", "SceneSpec", "check_scene",
+           "disparity_coefficients", "make_multi_scene", "make_scene", "object_band",
+           "write_multi_scene", "write_scene"]
 
 #: Foreground outlines, each inside the box ``cx +- rx``, ``cy +- ry`` of ``SceneSpec.ellipse``:
 #: the ellipse; the box; the box without its top-right corner ``(x > cx - 0.1 rx,
@@ -139,6 +140,55 @@ class SceneSpec:
     outline: str = "ellipse"
     d_max_step: int = 2
     props: tuple = ()
+
+
+@dataclass(frozen=True)
+class MultiSpec:
+    """Parameters of a rendered scene of several objects (:func:`make_multi_scene`).
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    d_bg : float or tuple of 6 float
+        The background (a wall, slanted or curved), as ``SceneSpec.d_bg``: seen wherever no
+        object is nearer.
+    texture_bg : dict, str or None
+        Its texture, as ``SceneSpec.texture_bg``.
+    objects : tuple of dict
+        The surfaces before the background, at any depths and in any order: each a dict with
+        ``d`` (as ``d_bg``), ``box`` (``(cx, cy, rx, ry)`` of its ``outline``, default
+        ``"rectangle"``; None or absent: the whole plane, seen where it is nearer than the
+        rest, e.g. a floor), ``angle`` (degrees the outline turns about the box's centre, from
+        the x axis toward the y axis; a thin turned rectangle is a rod), ``texture`` (as
+        ``texture_bg``) and ``name``.  Layer ``k + 1`` is ``objects[k]``; layer 0 is the
+        background.
+    clicked : int
+        Index in ``objects`` of the object to segment: ``fg_left`` and the evaluation band
+        are its own.
+    init_point : (float, float) or None
+        The click ``(x, y)``, on a visible pixel of the clicked object; None: the pixel
+        deepest inside its part seen by both cameras (:func:`_deepest_pixel`).
+    d_max : float or None
+        The search range; None: the smallest multiple of ``d_max_step`` >= max(disp_left) + 2.
+        A given one must be at least max(disp_left) + 2.
+    texture_cells, noise, quantize, band_radius, d_max_step
+        As in :class:`SceneSpec`.
+    """
+
+    width: int = 336
+    height: int = 280
+    d_bg: float | tuple = 8.0
+    texture_bg: dict | str | None = None
+    objects: tuple = ()
+    clicked: int = 0
+    init_point: tuple | None = None
+    d_max: float | None = None
+    texture_cells: tuple = (2.0, 5.0)
+    noise: float = 0.0
+    quantize: bool = True
+    band_radius: int = BAND_RADIUS
+    d_max_step: int = 2
 
 
 #: Named scenes: keyword overrides of :class:`SceneSpec`.
@@ -460,6 +510,161 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
               "theta_bg": theta_bg.tolist(), "spec": _jsonable(asdict(spec))})
 
 
+def _deepest_pixel(mask: np.ndarray) -> tuple:
+    """``(x, y)`` of the pixel of ``mask`` (H, W) farthest inside it: of its last non-empty
+    erosion (4-neighbour; outside the image is outside the mask), the pixel nearest that
+    erosion's centroid."""
+    core = mask.copy()
+    while True:
+        inner = core.copy()
+        inner[1:] &= core[:-1]
+        inner[:-1] &= core[1:]
+        inner[:, 1:] &= core[:, :-1]
+        inner[:, :-1] &= core[:, 1:]
+        inner[[0, -1]] = False
+        inner[:, [0, -1]] = False
+        if not inner.any():
+            break
+        core = inner
+    ys, xs = np.nonzero(core)
+    i = int(np.argmin((xs - xs.mean()) ** 2 + (ys - ys.mean()) ** 2))
+    return float(xs[i]), float(ys[i])
+
+
+def _on_mask(point, mask: np.ndarray) -> bool:
+    """Whether ``point`` is two finite numbers ``(x, y)`` whose nearest pixel is in ``mask``."""
+    try:
+        x, y = (float(v) for v in point)
+    except (TypeError, ValueError):
+        return False
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return False
+    ix, iy = int(round(x)), int(round(y))
+    return 0 <= iy < mask.shape[0] and 0 <= ix < mask.shape[1] and bool(mask[iy, ix])
+
+
+def object_band(fg_left, nearer, other_occ, radius: int = BAND_RADIUS) -> tuple:
+    """The evaluation band of one object among several (``docs/scene-format.md``).
+
+    The object's own boundary is its visible pixels with a left or right neighbour that lies
+    behind it (neither the object nor ``nearer``): an edge against a nearer object belongs to
+    that object.  The band is every pixel within ``radius`` columns of it (same row), minus
+    ``nearer`` pixels and ``other_occ``, the occlusions another object causes.  With nothing
+    nearer and no other occlusion it is :func:`~lss_kernels.metrics.band_from_foreground`.
+
+    Parameters
+    ----------
+    fg_left : ndarray, bool, shape (H, W)
+        The object's visible pixels (left view).
+    nearer : ndarray, bool, shape (H, W)
+        Pixels of other surfaces nearer than the object's surface there.
+    other_occ : ndarray, bool, shape (H, W)
+        Pixels hidden from the right camera by a surface other than the object.
+    radius : int
+        Half-width of the band in pixels.
+
+    Returns
+    -------
+    boundary, roi_fg, roi_bg : ndarray, bool, shape (H, W)
+        The own boundary and the object's and the background's parts of the band.
+    """
+    behind = ~fg_left & ~nearer
+    boundary = np.zeros_like(fg_left)
+    boundary[:, :-1] |= fg_left[:, :-1] & behind[:, 1:]
+    boundary[:, 1:] |= fg_left[:, 1:] & behind[:, :-1]
+    band = _dilate_rows(boundary, int(radius)) & ~other_occ
+    return boundary, band & fg_left, band & behind
+
+
+def make_multi_scene(*, seed: int = 0, **params) -> Scene:
+    """Render a scene of several objects at different depths with exact ground truth.
+
+    The views are ray cast as in :func:`make_scene`, over the background and
+    ``MultiSpec.objects``; one of them is the clicked object, whose boundary, occlusions and
+    depth are to be found among the others, before and behind it.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the textures and the noise; equal seeds give identical scenes.
+    **params
+        :class:`MultiSpec` fields (``objects`` at least).
+
+    Returns
+    -------
+    Scene
+        ``left``, ``right``, ``disp_left`` (the visible surface) as in :func:`make_scene`;
+        ``occ_left``: every left pixel hidden from the right camera, whatever hides it;
+        ``layers_left`` uint8 (H, W): the index of the surface each left pixel sees (0 the
+        background, ``k + 1`` for ``objects[k]``); ``fg_left``: the clicked object's visible
+        pixels; ``boundary``, ``roi_fg``, ``roi_bg`` its band (:func:`object_band`), where
+        ``other_occ`` is the occlusion not caused by the clicked object nor by the left image
+        border; ``init_point``; ``init_ellipse`` None; ``d_max``; ``meta`` the seed, the
+        spec and, per object, its name, coefficients, box, outline, angle and visible pixels.
+    """
+    spec = _spec(MultiSpec, params, "make_multi_scene", "seed, ")
+    _check_image(spec)
+    if not spec.objects:
+        raise ValueError("objects: expected at least one object, got none")
+    if len(spec.objects) > 254:
+        raise ValueError(f"objects: expected at most 254 (8-bit layer indices), got "
+                         f"{len(spec.objects)}")
+    if not isinstance(spec.clicked, int) or not 0 <= spec.clicked < len(spec.objects):
+        raise ValueError(f"clicked: expected an index in objects (0..{len(spec.objects) - 1}), "
+                         f"got {spec.clicked!r}")
+    w, h = int(spec.width), int(spec.height)
+    surfaces = [_Surface(_theta(spec.d_bg, "d_bg")), *_surfaces(spec.objects, "objects")]
+    pad = _pad(surfaces, w, h)
+    _check_surfaces(surfaces, ["d_bg", *(f"objects[{i}]: d" for i in range(len(spec.objects)))],
+                    w, h, pad)
+
+    rng = np.random.default_rng(seed)
+    box = (-pad, -1.0, w + pad, h + 1.0)
+    textures = [make_texture(rng, spec.texture_bg, spec.texture_cells, box, "texture_bg"),
+                *(make_texture(rng, item.get("texture"), spec.texture_cells, box,
+                               f"objects[{i}]: texture") for i, item in enumerate(spec.objects))]
+    left, right, seen, d_left, occ = _render(surfaces, textures, w, h)
+    clicked = surfaces[spec.clicked + 1]
+    fg = seen == spec.clicked + 1
+    if not fg.any():
+        raise ValueError(f"clicked: objects[{spec.clicked}] is hidden by nearer objects in "
+                         f"the left view")
+
+    # The clicked object's own occlusions: it holds a nearer point on the pixel's right ray.
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    xr = x - d_left
+    xk = _source_x(clicked.theta, xr, y)
+    own_occ = clicked.covers(xk, y) & (_disparity(clicked.theta, xk, y) > d_left)
+    nearer = ~fg & (d_left > _disparity(clicked.theta, x, y))
+    boundary, roi_fg, roi_bg = object_band(fg, nearer, occ & ~own_occ & (xr >= -0.5),
+                                           spec.band_radius)
+
+    point = _deepest_pixel(fg & ~occ) if spec.init_point is None else spec.init_point
+    if not _on_mask(point, fg):
+        raise ValueError(f"init_point: expected (x, y) on a visible pixel of the clicked "
+                         f"object, got {spec.init_point!r}")
+    need = float(d_left.max()) + 2.0
+    step = int(spec.d_max_step)
+    d_max = float(step * math.ceil(need / step)) if spec.d_max is None else float(spec.d_max)
+    if d_max < need:
+        raise ValueError(f"d_max: expected at least max(disp_left) + 2 = {need:.4g}, "
+                         f"got {spec.d_max}")
+    objects = [{"name": item.get("name", f"object {i}"), "layer": i + 1,
+                "theta": surface.theta.tolist(),
+                "box": None if surface.box is None else list(surface.box),
+                "outline": surface.outline, "angle": surface.angle,
+                "visible_px": int((seen == i + 1).sum())}
+               for i, (item, surface) in enumerate(zip(spec.objects, surfaces[1:]))]
+    left, right = (_finish(img, spec, rng) for img in (left, right))
+    return Scene(
+        name=f"multi_seed{seed}", left=left, right=right, d_max=d_max, init_ellipse=None,
+        init_point=tuple(float(v) for v in point), disp_left=d_left.astype(np.float32), fg_left=fg, occ_left=occ,
+        roi_fg=roi_fg, roi_bg=roi_bg, boundary=boundary, layers_left=seen.astype(np.uint8),
+        meta={"generator": "lss_kernels.scenes", "kind": "multi", "seed": int(seed),
+              "clicked": spec.clicked, "theta_bg": surfaces[0].theta.tolist(),
+              "objects": objects, "spec": _jsonable(asdict(spec))})
+
+
 def _finish(img: np.ndarray, spec: SceneSpec, rng) -> np.ndarray:
     """Add the photometric noise, clip to [0, 1], quantise if asked; float32."""
     if spec.noise > 0:
@@ -486,7 +691,17 @@ def write_scene(folder, preset: str | None = "easy", *, seed: int = 0, name: str
     ``name`` replaces the scene's name and ``meta`` is merged into its ``meta`` (both are
     written to ``meta.json``).
     """
-    scene = make_scene(preset, seed=seed, **params)
+    return _save(folder, make_scene(preset, seed=seed, **params), name, meta)
+
+
+def write_multi_scene(folder, *, seed: int = 0, name: str | None = None,
+                      meta: dict | None = None, **params) -> Scene:
+    """:func:`make_multi_scene` then :func:`lss_kernels.io.save_scene`, as :func:`write_scene`."""
+    return _save(folder, make_multi_scene(seed=seed, **params), name, meta)
+
+
+def _save(folder, scene: Scene, name: str | None, meta: dict | None) -> Scene:
+    """Rename ``scene`` (unless ``name`` is None), merge ``meta`` into its meta, save it."""
     if name is not None:
         scene.name = name
     scene.meta.update(meta or {})
