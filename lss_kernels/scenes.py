@@ -630,11 +630,12 @@ def make_multi_scene(*, seed: int = 0, **params) -> Scene:
         raise ValueError(f"clicked: objects[{spec.clicked}] is hidden by nearer objects in "
                          f"the left view")
 
-    # The clicked object's own occlusions: it holds a nearer point on the pixel's right ray.
+    # The clicked object's own occlusions: it holds a nearer point on the right-view ray of a
+    # pixel that is not its own (it does not fold, so it never hides itself).
     y, x = np.mgrid[0:h, 0:w].astype(np.float64)
     xr = x - d_left
     xk = _source_x(clicked.theta, xr, y)
-    own_occ = clicked.covers(xk, y) & (_disparity(clicked.theta, xk, y) > d_left)
+    own_occ = ~fg & clicked.covers(xk, y) & (_disparity(clicked.theta, xk, y) > d_left)
     nearer = ~fg & (d_left > _disparity(clicked.theta, x, y))
     boundary, roi_fg, roi_bg = object_band(fg, nearer, occ & ~own_occ & (xr >= -0.5),
                                            spec.band_radius)

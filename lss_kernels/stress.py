@@ -406,7 +406,7 @@ def _multi_scenes(rng) -> list:
              _obj("neighbour", 66, (240.0, 300.0, 70.0, 110.0)),
              _obj("floor", {"d": 20 - 0.15 * (420 - 280), "slope": (0.0, 0.15)}, None),
              _obj("ellipse", 72, (380.0, 280.0, 95.0, 120.0), "ellipse"),
-             _obj("front ellipse", 100, (500.0, 410.0, 55.0, 70.0), "ellipse")]}),
+             _obj("front ellipse", 100, (460.0, 380.0, 55.0, 70.0), "ellipse")]}),
         ("weak", "an L of 12 grey levels at 60 px, slanted; a bar at 92 px across its top, a "
                  "box at 84 px over its right, a box at 40 px behind",
          {"d_bg": {"d": 26, "slope": (-0.015, 0.02)}, "clicked": 0, "objects": [
