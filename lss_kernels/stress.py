@@ -573,7 +573,7 @@ def main(argv=None) -> int:
                         help="N scenes drawn at random instead of the families")
     parser.add_argument("--multi", action="store_true",
                         help="the multi-object family instead (whole photos: one clicked "
-                             "object among others, docs/stress.md)")
+                             "object among others, docs/scene-format.md)")
     args = parser.parse_args(argv)
     if args.random < 0:
         parser.error(f"--random: expected a number of scenes >= 0, got {args.random}")

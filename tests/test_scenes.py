@@ -394,6 +394,24 @@ def test_the_band_is_the_clicked_objects_own():
     assert (scene.fg_left & ~scene.occ_left)[y - 7:y + 8, x - 7:x + 8].all()
 
 
+def test_scoring_reads_the_clicked_objects_band_from_the_folder(tmp_path):
+    """``roi_fg.png`` / ``roi_bg.png`` carry the rule: a prediction that is wrong only on the
+    box before the object (its depth, and occlusion all over it) scores perfectly from the
+    folder, and not with the band recomputed from ``fg_left`` alone."""
+    import dataclasses
+    write_multi_scene(tmp_path / "s", seed=1, width=128, height=64, d_bg=4.0, objects=[
+        {"d": 20.0, "box": (45.3, 32.0, 15.0, 20.0)},
+        {"d": 30.0, "box": (71.3, 32.0, 15.0, 10.0)}], clicked=0)
+    scene = load_scene(tmp_path / "s")
+    front = scene.layers_left == 2
+    disparity = np.where(front, 4.0, scene.disp_left)
+    occlusion = scene.occ_left | front
+    s = score(disparity, occlusion, scene)
+    assert (s["occ_f1"], s["bad4"]) == (1.0, 0.0)
+    s = score(disparity, occlusion, dataclasses.replace(scene, roi_fg=None, roi_bg=None))
+    assert s["occ_f1"] < 0.9 and s["bad4"] > 10
+
+
 def test_one_object_gives_the_two_layer_truth():
     """With one object before a wall, the object's band is the paper's band and the truth is
     the two-layer scene's (only the textures are drawn in another order)."""
