@@ -1,4 +1,4 @@
-"""Two-layer synthetic stereo scenes with exact ground truth.
+"""Synthetic stereo scenes with exact ground truth: two layers, or several objects.
 
 A textured foreground surface with an elliptic (or rectangular, L-shaped, blob) outline floats
 in front of a textured background surface.  Each surface ``S`` is a disparity function quadratic
@@ -22,6 +22,12 @@ noise, stripes, and palette blobs (camouflage, when both layers share the palett
 ``SceneSpec.props`` adds surfaces behind the object (boxes, a floor meeting the wall, a shelf):
 each view shows the nearest surface on each ray, and the ground truth counts them as background.
 
+:func:`make_multi_scene` renders several objects at different depths instead (whole photos):
+the same ray cast over a list of surfaces, any of them in front of the clicked object, with
+outlines that may turn (a thin turned rectangle is a rod or a handle); it also gives the
+index of the surface each left pixel sees (``layers_left``), a click on the object
+(``init_point``) and the band of that object alone (:func:`object_band`).
+
 Presets (:data:`PRESETS`): ``"easy"`` (128x96, fronto-parallel layers at 24 and 8 px),
 ``"slanted"`` (128x96, curved slanted foreground over a slanted background) and ``"tiny"``
 (64x48, layers at 12 and 4 px, for quick tests).
@@ -30,6 +36,9 @@ Examples
 --------
 >>> scene = make_scene("tiny", seed=1)
 >>> scene = make_scene("easy", noise=0.02, d_fg=disparity_coefficients(20.0, slope=(0.05, 0)))
+>>> scene = make_multi_scene(width=128, height=96, d_bg=6.0, clicked=0, objects=[
+...     {"d": 20.0, "box": (64.0, 48.0, 24.0, 20.0), "outline": "ellipse"},
+...     {"d": 28.0, "box": (64.0, 48.0, 70.0, 2.5), "angle": -20.0}])     # a rod before it
 """
 from __future__ import annotations
 
@@ -119,8 +128,9 @@ class SceneSpec:
         Further surfaces behind the object, which the ground truth counts as background
         (clutter, a floor, a shelf): each a dict with ``d`` (as ``d_bg``), ``box`` (``(cx, cy,
         rx, ry)`` of its ``outline``, default ``"rectangle"``; None or absent: the whole plane,
-        seen where it is nearer than the rest, e.g. a floor that meets the wall) and
-        ``texture`` (as ``texture_bg``).  Both views show the nearest surface on each ray;
+        seen where it is nearer than the rest, e.g. a floor that meets the wall),
+        ``texture`` (as ``texture_bg``), and ``angle`` and ``name`` as in
+        ``MultiSpec.objects``.  Both views show the nearest surface on each ray;
         inside the object's outline every prop must lie behind the object.
     """
 

@@ -362,7 +362,8 @@ MULTI_SIZES = {"small": (168, 140), "medium": (336, 280), "photo": (672, 560)}
 #: What the multi-object family tests.
 MULTI_FAMILY = ("3-6 objects at different depths over slanted or curved walls, shelves and "
                 "floors; objects partly in front of the clicked one, thin rods and handles "
-                "across it, a neighbour a few pixels behind it, a weakly textured object")
+                "across it, a neighbour a few pixels behind it, a weakly textured object; "
+                "each surface with one of the package's textures")
 
 _MULTI_D_MAX = 128.0                        # photo pixels, scaled with the image
 _PHOTO_CENTRE = (336.0, 280.0)
@@ -458,10 +459,21 @@ def _multi_scenes(rng) -> list:
 
 
 def _multi_texture(rng) -> dict:
-    """A texture for an object without its own: tinted value noise, or a palette."""
-    if rng.random() < 0.7:
-        return {"kind": "random", "tint": float(rng.uniform(0.1, 0.3))}
-    return _palette(rng, 4, float(rng.uniform(4.0, 10.0)))
+    """A texture for a surface without its own, of the package's four kinds equally likely:
+    tinted value noise of contrast 0.4-0.8, a palette of 3-5 colours in blobs of 4-12 px,
+    10-30 grey levels (weak), or stripes of period 4-10 px turned by up to 30 degrees with
+    10-30 % of noise mixed in."""
+    kind = int(rng.integers(4))
+    if kind == 0:
+        contrast = float(rng.uniform(0.4, 0.8))
+        return {"kind": "random", "tint": float(rng.uniform(0.1, 0.3)), "contrast": contrast,
+                "low": (1.0 - contrast) / 2}
+    if kind == 1:
+        return _palette(rng, int(rng.integers(3, 6)), float(rng.uniform(4.0, 12.0)))
+    if kind == 2:
+        return _weak(float(rng.uniform(10.0, 30.0)), float(rng.uniform(0.15, 0.6)))
+    return _stripes(rng.uniform(4.0, 10.0), angle=float(rng.uniform(-30.0, 30.0)),
+                    mix=float(rng.uniform(0.1, 0.3)))
 
 
 def _multi_placed(params: dict, rng, scale: float) -> dict:
