@@ -616,8 +616,8 @@ def make_multi_scene(*, seed: int = 0, **params) -> Scene:
     _check_image(spec)
     if not spec.objects:
         raise ValueError("objects: expected at least one object, got none")
-    if len(spec.objects) > 254:
-        raise ValueError(f"objects: expected at most 254 (8-bit layer indices), got "
+    if len(spec.objects) > 255:
+        raise ValueError(f"objects: expected at most 255 (8-bit layer indices), got "
                          f"{len(spec.objects)}")
     if not isinstance(spec.clicked, int) or not 0 <= spec.clicked < len(spec.objects):
         raise ValueError(f"clicked: expected an index in objects (0..{len(spec.objects) - 1}), "
@@ -650,6 +650,9 @@ def make_multi_scene(*, seed: int = 0, **params) -> Scene:
     boundary, roi_fg, roi_bg = object_band(fg, nearer, occ & ~own_occ & (xr >= -0.5),
                                            spec.band_radius)
 
+    if spec.init_point is None and not (fg & ~occ).any():
+        raise ValueError(f"clicked: objects[{spec.clicked}] is hidden from the right camera "
+                         f"wherever the left one sees it; give init_point")
     point = _deepest_pixel(fg & ~occ) if spec.init_point is None else spec.init_point
     if not _on_mask(point, fg):
         raise ValueError(f"init_point: expected (x, y) on a visible pixel of the clicked "
@@ -669,15 +672,17 @@ def make_multi_scene(*, seed: int = 0, **params) -> Scene:
     left, right = (_finish(img, spec, rng) for img in (left, right))
     return Scene(
         name=f"multi_seed{seed}", left=left, right=right, d_max=d_max, init_ellipse=None,
-        init_point=tuple(float(v) for v in point), disp_left=d_left.astype(np.float32), fg_left=fg, occ_left=occ,
-        roi_fg=roi_fg, roi_bg=roi_bg, boundary=boundary, layers_left=seen.astype(np.uint8),
+        init_point=tuple(float(v) for v in point), disp_left=d_left.astype(np.float32),
+        fg_left=fg, occ_left=occ, roi_fg=roi_fg, roi_bg=roi_bg, boundary=boundary,
+        layers_left=seen.astype(np.uint8),
         meta={"generator": "lss_kernels.scenes", "kind": "multi", "seed": int(seed),
               "clicked": spec.clicked, "theta_bg": surfaces[0].theta.tolist(),
               "objects": objects, "spec": _jsonable(asdict(spec))})
 
 
-def _finish(img: np.ndarray, spec: SceneSpec, rng) -> np.ndarray:
-    """Add the photometric noise, clip to [0, 1], quantise if asked; float32."""
+def _finish(img: np.ndarray, spec, rng) -> np.ndarray:
+    """Add the photometric noise of ``spec`` (a :class:`SceneSpec` or :class:`MultiSpec`),
+    clip to [0, 1], quantise if asked; float32."""
     if spec.noise > 0:
         img = img + rng.normal(0.0, spec.noise, img.shape)
     img = np.clip(img, 0.0, 1.0)

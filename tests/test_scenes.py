@@ -465,3 +465,19 @@ def test_multi_errors(extra, message):
               "objects": [o for o, _ in _OBJECTS], **extra}
     with pytest.raises(ValueError, match=message):
         make_multi_scene(**params)
+
+
+def test_a_bad_click_or_layer_map_in_a_folder_is_named(tmp_path):
+    import json
+
+    from lss_kernels.io import write_png
+    write_multi_scene(tmp_path / "s", seed=1, width=48, height=32, d_bg=4.0, objects=[
+        {"d": 10.0, "box": (24.0, 16.0, 10.0, 8.0)}])
+    meta = json.loads((tmp_path / "s" / "meta.json").read_text())
+    (tmp_path / "s" / "meta.json").write_text(json.dumps({**meta, "init_point": [3, "x"]}))
+    with pytest.raises(ValueError, match=r"init_point: expected \[x, y\]"):
+        load_scene(tmp_path / "s")
+    (tmp_path / "s" / "meta.json").write_text(json.dumps(meta))
+    write_png(tmp_path / "s" / "layers_left.png", np.zeros((32, 48, 3), np.uint8))
+    with pytest.raises(ValueError, match="layers_left.png: expected an 8-bit gray image"):
+        load_scene(tmp_path / "s")

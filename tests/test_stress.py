@@ -431,7 +431,8 @@ def test_multi_family_is_deterministic_and_scales():
     photo = dict(stress.multi_specs(seed=3, size="photo"))["multi_rod"]
     small = dict(a)["multi_rod"]
     assert (photo["width"], photo["height"], photo["d_max"]) == (672, 560, 128.0)
-    np.testing.assert_allclose(photo["objects"][0]["box"], 4 * np.asarray(small["objects"][0]["box"]))
+    np.testing.assert_allclose(photo["objects"][0]["box"],
+                               4 * np.asarray(small["objects"][0]["box"]))
     with pytest.raises(ValueError, match="size: unknown 'huge' for the multi family"):
         stress.multi_specs(size="huge")
 
