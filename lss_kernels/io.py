@@ -6,8 +6,9 @@ disparities are float32 ``(H, W)`` in left-view pixels with ``inf`` = unknown, s
 the Middlebury layout (``Pf`` grayscale header, scale ``-1.0`` = little-endian, rows bottom-up).
 
 A scene folder holds ``left.png``, ``right.png`` and ``meta.json`` (required) and optionally
-``disp_left.pfm``, ``fg_left.png``, ``occ_left.png``, ``roi_fg.png``, ``roi_bg.png`` and
-``boundary.png``; :func:`load_scene` and :func:`save_scene` read and write it.
+``disp_left.pfm``, ``fg_left.png``, ``occ_left.png``, ``roi_fg.png``, ``roi_bg.png``,
+``boundary.png`` and ``layers_left.png``; :func:`load_scene` and :func:`save_scene` read and
+write it.
 
 Every reader fails with a one-line ``ValueError`` or ``FileNotFoundError`` that names the
 argument, what was expected and what was given; errors of the image library are chained, never
@@ -241,11 +242,15 @@ class Scene:
         x to the right, y down); None: the solvers find one (``init="auto"``).
     init_ellipse_cyclopean : tuple of float or None
         The same ellipse in the cyclopean frame, when known.
+    init_point : tuple of float or None
+        ``(x, y)``: a click on the object (left view), the start when there is no ellipse.
     disp_left : ndarray, float32, shape (H, W), or None
         Ground-truth left-view disparity; ``inf`` = unknown.
     fg_left, occ_left, roi_fg, roi_bg, boundary : ndarray, bool, shape (H, W), or None
         Left-view foreground, occlusion (seen by the left camera only), the foreground and
         background parts of the evaluation band, and the true boundary pixels.
+    layers_left : ndarray, uint8, shape (H, W), or None
+        The index of the surface each left pixel sees (0: the background).
     meta : dict
         Everything in ``meta.json``.
     path : str or None
@@ -266,6 +271,8 @@ class Scene:
     boundary: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
     path: str | None = None
+    init_point: tuple | None = None
+    layers_left: np.ndarray | None = None
 
 
 def _ellipse(value, what: str) -> tuple:
@@ -277,6 +284,26 @@ def _ellipse(value, what: str) -> tuple:
     if len(e) != 4 or not all(np.isfinite(e)) or e[2] <= 0 or e[3] <= 0:
         raise ValueError(f"{what}: expected [cx, cy, rx, ry] with rx, ry > 0, got {value!r}")
     return e
+
+
+def _point(value, what: str) -> tuple:
+    """``[x, y]`` from meta.json as a tuple of two finite floats."""
+    try:
+        p = tuple(float(v) for v in value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{what}: expected [x, y], got {value!r}") from exc
+    if len(p) != 2 or not all(np.isfinite(p)):
+        raise ValueError(f"{what}: expected [x, y] of two finite numbers, got {value!r}")
+    return p
+
+
+def _read_layers(path, name: str) -> np.ndarray:
+    """An 8-bit gray index map (``layers_left.png``) as uint8 ``(H, W)``."""
+    a = _as_pixels(path, name)
+    if a.dtype != np.uint8 or a.shape[2] != 1:
+        raise ValueError(f"{name}: expected an 8-bit gray image of layer indices, got "
+                         f"{a.dtype} with {a.shape[2]} channel(s)")
+    return np.ascontiguousarray(a[:, :, 0])
 
 
 def _read_meta(folder: Path) -> dict:
@@ -301,7 +328,7 @@ def load_scene(folder) -> Scene:
     ----------
     folder : str or path-like
         Holds ``left.png``, ``right.png`` and ``meta.json`` (with ``d_max`` and optionally
-        ``init_ellipse``); the ground-truth files are optional.
+        ``init_ellipse`` or ``init_point``); the ground-truth files are optional.
 
     Returns
     -------
@@ -332,6 +359,7 @@ def load_scene(folder) -> Scene:
     masks = {k: check(read_mask(folder / f"{k}.png", f"scene {folder}: {k}.png"), f"{k}.png")
              for k in _MASK_FILES if (folder / f"{k}.png").is_file()}
     disp = folder / "disp_left.pfm"
+    layers = folder / "layers_left.png"
     cyc = meta.get("init_ellipse_cyclopean")
     return Scene(
         name=str(meta.get("name", folder.name)), left=left, right=right,
@@ -340,7 +368,11 @@ def load_scene(folder) -> Scene:
                       _ellipse(meta["init_ellipse"], f"scene {folder}: init_ellipse")),
         init_ellipse_cyclopean=(None if cyc is None else
                                 _ellipse(cyc, f"scene {folder}: init_ellipse_cyclopean")),
+        init_point=(None if meta.get("init_point") is None else
+                    _point(meta["init_point"], f"scene {folder}: init_point")),
         disp_left=check(read_pfm(disp), "disp_left.pfm") if disp.is_file() else None,
+        layers_left=(check(_read_layers(layers, f"scene {folder}: layers_left.png"),
+                           "layers_left.png") if layers.is_file() else None),
         meta=meta, path=str(folder), **masks)
 
 
@@ -349,7 +381,7 @@ def save_scene(folder, scene: Scene) -> Path:
 
     The folder is created if needed.  Images are rounded to 8 bits; ground-truth fields that are
     None are not written; ``meta.json`` is ``scene.meta`` updated with the name, size, ``d_max``
-    and the initial ellipses.
+    and the initial ellipses and point (those that are not None).
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -360,12 +392,14 @@ def save_scene(folder, scene: Scene) -> Path:
     for k in _MASK_FILES:
         if getattr(scene, k) is not None:
             write_mask(folder / f"{k}.png", getattr(scene, k))
+    if scene.layers_left is not None:
+        write_png(folder / "layers_left.png", np.asarray(scene.layers_left))
     h, w = scene.left.shape[:2]
     meta = {**scene.meta, "name": scene.name, "width": int(w), "height": int(h),
-            "d_max": float(scene.d_max),
-            "init_ellipse": [float(v) for v in scene.init_ellipse]}
-    if scene.init_ellipse_cyclopean is not None:
-        meta["init_ellipse_cyclopean"] = [float(v) for v in scene.init_ellipse_cyclopean]
+            "d_max": float(scene.d_max)}
+    for key in ("init_ellipse", "init_ellipse_cyclopean", "init_point"):
+        if getattr(scene, key) is not None:
+            meta[key] = [float(v) for v in getattr(scene, key)]
     (folder / "meta.json").write_text(json.dumps(meta, indent=1))
     return folder
 

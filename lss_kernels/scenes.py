@@ -1,4 +1,4 @@
-"""Two-layer synthetic stereo scenes with exact ground truth.
+"""Synthetic stereo scenes with exact ground truth: two layers, or several objects.
 
 A textured foreground surface with an elliptic (or rectangular, L-shaped, blob) outline floats
 in front of a textured background surface.  Each surface ``S`` is a disparity function quadratic
@@ -22,6 +22,12 @@ noise, stripes, and palette blobs (camouflage, when both layers share the palett
 ``SceneSpec.props`` adds surfaces behind the object (boxes, a floor meeting the wall, a shelf):
 each view shows the nearest surface on each ray, and the ground truth counts them as background.
 
+:func:`make_multi_scene` renders several objects at different depths instead (whole photos):
+the same ray cast over a list of surfaces, any of them in front of the clicked object, with
+outlines that may turn (a thin turned rectangle is a rod or a handle); it also gives the
+index of the surface each left pixel sees (``layers_left``), a click on the object
+(``init_point``) and the band of that object alone (:func:`object_band`).
+
 Presets (:data:`PRESETS`): ``"easy"`` (128x96, fronto-parallel layers at 24 and 8 px),
 ``"slanted"`` (128x96, curved slanted foreground over a slanted background) and ``"tiny"``
 (64x48, layers at 12 and 4 px, for quick tests).
@@ -30,6 +36,9 @@ Examples
 --------
 >>> scene = make_scene("tiny", seed=1)
 >>> scene = make_scene("easy", noise=0.02, d_fg=disparity_coefficients(20.0, slope=(0.05, 0)))
+>>> scene = make_multi_scene(width=128, height=96, d_bg=6.0, clicked=0, objects=[
+...     {"d": 20.0, "box": (64.0, 48.0, 24.0, 20.0), "outline": "ellipse"},
+...     {"d": 28.0, "box": (64.0, 48.0, 70.0, 2.5), "angle": -20.0}])     # a rod before it
 """
 from __future__ import annotations
 
@@ -39,11 +48,12 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 
 from .io import Scene, save_scene
-from .metrics import BAND_RADIUS, band_from_foreground, boundary_from_foreground
+from .metrics import BAND_RADIUS, _dilate_rows, band_from_foreground, boundary_from_foreground
 from .textures import TEXTURES, make_texture
 
-__all__ = ["OUTLINES", "PRESETS", "TEXTURES", "SceneSpec", "check_scene",
-           "disparity_coefficients", "make_scene", "write_scene"]
+__all__ = ["OUTLINES", "PRESETS", "TEXTURES", "MultiSpec", "SceneSpec", "check_scene",
+           "disparity_coefficients", "make_multi_scene", "make_scene", "object_band",
+           "write_multi_scene", "write_scene"]
 
 #: Foreground outlines, each inside the box ``cx +- rx``, ``cy +- ry`` of ``SceneSpec.ellipse``:
 #: the ellipse; the box; the box without its top-right corner ``(x > cx - 0.1 rx,
@@ -118,8 +128,9 @@ class SceneSpec:
         Further surfaces behind the object, which the ground truth counts as background
         (clutter, a floor, a shelf): each a dict with ``d`` (as ``d_bg``), ``box`` (``(cx, cy,
         rx, ry)`` of its ``outline``, default ``"rectangle"``; None or absent: the whole plane,
-        seen where it is nearer than the rest, e.g. a floor that meets the wall) and
-        ``texture`` (as ``texture_bg``).  Both views show the nearest surface on each ray;
+        seen where it is nearer than the rest, e.g. a floor that meets the wall),
+        ``texture`` (as ``texture_bg``), and ``angle`` and ``name`` as in
+        ``MultiSpec.objects``.  Both views show the nearest surface on each ray;
         inside the object's outline every prop must lie behind the object.
     """
 
@@ -139,6 +150,55 @@ class SceneSpec:
     outline: str = "ellipse"
     d_max_step: int = 2
     props: tuple = ()
+
+
+@dataclass(frozen=True)
+class MultiSpec:
+    """Parameters of a rendered scene of several objects (:func:`make_multi_scene`).
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    d_bg : float or tuple of 6 float
+        The background (a wall, slanted or curved), as ``SceneSpec.d_bg``: seen wherever no
+        object is nearer.
+    texture_bg : dict, str or None
+        Its texture, as ``SceneSpec.texture_bg``.
+    objects : tuple of dict
+        The surfaces before the background, at any depths and in any order: each a dict with
+        ``d`` (as ``d_bg``), ``box`` (``(cx, cy, rx, ry)`` of its ``outline``, default
+        ``"rectangle"``; None or absent: the whole plane, seen where it is nearer than the
+        rest, e.g. a floor), ``angle`` (degrees the outline turns about the box's centre, from
+        the x axis toward the y axis; a thin turned rectangle is a rod), ``texture`` (as
+        ``texture_bg``) and ``name``.  Layer ``k + 1`` is ``objects[k]``; layer 0 is the
+        background.
+    clicked : int
+        Index in ``objects`` of the object to segment: ``fg_left`` and the evaluation band
+        are its own.
+    init_point : (float, float) or None
+        The click ``(x, y)``, on a visible pixel of the clicked object; None: the pixel
+        deepest inside its part seen by both cameras (:func:`_deepest_pixel`).
+    d_max : float or None
+        The search range; None: the smallest multiple of ``d_max_step`` >= max(disp_left) + 2.
+        A given one must be at least max(disp_left) + 2.
+    texture_cells, noise, quantize, band_radius, d_max_step
+        As in :class:`SceneSpec`.
+    """
+
+    width: int = 336
+    height: int = 280
+    d_bg: float | tuple = 8.0
+    texture_bg: dict | str | None = None
+    objects: tuple = ()
+    clicked: int = 0
+    init_point: tuple | None = None
+    d_max: float | None = None
+    texture_cells: tuple = (2.0, 5.0)
+    noise: float = 0.0
+    quantize: bool = True
+    band_radius: int = BAND_RADIUS
+    d_max_step: int = 2
 
 
 #: Named scenes: keyword overrides of :class:`SceneSpec`.
@@ -185,10 +245,15 @@ def _source_x(theta: np.ndarray, xr, y):
         return 2.0 * big_c / (big_b + np.sqrt(big_b * big_b - 4.0 * a * big_c))
 
 
-def _inside(ellipse, x, y, outline: str = "ellipse"):
-    """Whether the left-view points ``(x, y)`` lie inside the foreground (NaN: outside)."""
+def _inside(ellipse, x, y, outline: str = "ellipse", angle: float = 0.0):
+    """Whether the left-view points ``(x, y)`` lie inside an outline (NaN: outside): its box
+    ``ellipse = (cx, cy, rx, ry)`` turned by ``angle`` degrees about its centre, from the
+    x axis toward the y axis (0: axis-aligned, and then ``(u, v)`` are exactly the unturned
+    ones)."""
     cx, cy, rx, ry = ellipse
-    u, v = (x - cx) / rx, (y - cy) / ry
+    cos, sin = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+    u = (cos * (x - cx) + sin * (y - cy)) / rx
+    v = (cos * (y - cy) - sin * (x - cx)) / ry
     if outline == "ellipse":
         return u ** 2 + v ** 2 <= 1.0
     box = (np.abs(u) <= 1.0) & (np.abs(v) <= 1.0)
@@ -201,32 +266,44 @@ def _inside(ellipse, x, y, outline: str = "ellipse"):
                               + 0.1 * np.cos(5 * angle + 2.0)) / 1.3
 
 
-def _check(spec: SceneSpec, surfaces: list, ellipse, pad: int) -> None:
-    """The scene must be a valid two-layer scene on the rendered domain: ``surfaces`` are
-    the background, the props and the object (:func:`_geometry`)."""
+def _check_image(spec) -> None:
+    """The checks of a :class:`SceneSpec` or :class:`MultiSpec` that do not depend on its
+    surfaces: the size, ``d_max_step`` and ``noise``."""
     if spec.width < 8 or spec.height < 8:
         raise ValueError(f"width, height: expected at least 8 pixels, got {spec.width}x{spec.height}")
-    if ellipse[2] <= 0 or ellipse[3] <= 0:
-        raise ValueError(f"ellipse: expected radii > 0, got {ellipse}")
-    if spec.outline not in OUTLINES:
-        raise ValueError(f"outline: unknown {spec.outline!r}; valid: {', '.join(OUTLINES)}")
     if int(spec.d_max_step) != spec.d_max_step or spec.d_max_step < 1:
         raise ValueError(f"d_max_step: expected a positive integer, got {spec.d_max_step}")
     if not 0.0 <= spec.noise <= 1.0:
         raise ValueError(f"noise: expected a standard deviation in [0, 1], got {spec.noise}")
-    names = ["d_bg", *(f"props[{i}]: d" for i in range(len(spec.props))), "d_fg"]
-    y, x = np.mgrid[0:spec.height, -pad:spec.width + pad].astype(np.float64)
+
+
+def _check_surfaces(surfaces: list, names: list, width: int, height: int, pad: int) -> None:
+    """Each surface must have a disparity >= 0 in the image (a whole plane other than the
+    background only where it is seen, that is nearer than the rest) and must not fold in the
+    right view: ``d/dx < 0.9`` over the rendered domain (``pad`` columns either side)."""
+    y, x = np.mgrid[0:height, -pad:width + pad].astype(np.float64)
     for i, (surface, name) in enumerate(zip(surfaces, names)):
         d = _disparity(surface.theta, x, y)
         dx = 2 * surface.theta[0] * x + surface.theta[1] * y + surface.theta[3]
-        # a whole-plane prop is only seen where it is nearer than the background
         if (i == 0 or surface.box is not None) and d[:, pad:-pad].min() < 0:
             raise ValueError(f"{name}: disparity must be >= 0 in the image, min is "
                              f"{d[:, pad:-pad].min():.3g}")
         if dx.max() >= 0.9:
             raise ValueError(f"{name}: d/dx must stay below 0.9 (the surface must not fold in "
                              f"the right view), max is {dx.max():.3g}")
-    y, x = y[:, pad:-pad], x[:, pad:-pad]
+
+
+def _check(spec: SceneSpec, surfaces: list, ellipse, pad: int) -> None:
+    """The scene must be a valid two-layer scene on the rendered domain: ``surfaces`` are
+    the background, the props and the object (:func:`_geometry`)."""
+    _check_image(spec)
+    if ellipse[2] <= 0 or ellipse[3] <= 0:
+        raise ValueError(f"ellipse: expected radii > 0, got {ellipse}")
+    if spec.outline not in OUTLINES:
+        raise ValueError(f"outline: unknown {spec.outline!r}; valid: {', '.join(OUTLINES)}")
+    names = ["d_bg", *(f"props[{i}]: d" for i in range(len(spec.props))), "d_fg"]
+    _check_surfaces(surfaces, names, spec.width, spec.height, pad)
+    y, x = np.mgrid[0:spec.height, 0:spec.width].astype(np.float64)
     inside = _inside(ellipse, x, y, spec.outline)
     if not inside.any():
         raise ValueError(f"ellipse: {ellipse} covers no pixel of the {spec.width}x{spec.height} image")
@@ -251,43 +328,56 @@ def _check(spec: SceneSpec, surfaces: list, ellipse, pad: int) -> None:
 @dataclass(frozen=True)
 class _Surface:
     """A rendered surface: disparity coefficients on U, and the outline that bounds it in
-    surface (left-view) coordinates (``box`` None: the whole plane)."""
+    surface (left-view) coordinates (``box`` None: the whole plane), turned by ``angle``
+    degrees about the box's centre."""
 
     theta: np.ndarray
     box: tuple | None = None
     outline: str = "rectangle"
+    angle: float = 0.0
 
     def covers(self, x, y):
         """Whether the surface holds the points ``(x, y)`` (NaN: a ray that misses it)."""
-        return np.isfinite(x) if self.box is None else _inside(self.box, x, y, self.outline)
+        return np.isfinite(x) if self.box is None else _inside(self.box, x, y, self.outline,
+                                                               self.angle)
 
 
-_PROP_KEYS = ("d", "box", "outline", "texture")
+_SURFACE_KEYS = ("d", "box", "outline", "angle", "texture", "name")
 
 
-def _props(spec: SceneSpec) -> list:
-    """The :class:`_Surface` of each of ``spec.props``, checked."""
+def _surfaces(items, what: str) -> list:
+    """The :class:`_Surface` of each dict of ``items`` (``SceneSpec.props`` or
+    ``MultiSpec.objects``, named ``what`` in errors), checked."""
     surfaces = []
-    for i, prop in enumerate(spec.props):
-        name = f"props[{i}]"
-        if not isinstance(prop, dict) or "d" not in prop:
-            raise ValueError(f"{name}: expected a dict with 'd' and any of 'box', 'outline', "
-                             f"'texture', got {prop!r}")
-        unknown = sorted(set(prop) - set(_PROP_KEYS))
+    for i, item in enumerate(items):
+        name = f"{what}[{i}]"
+        if not isinstance(item, dict) or "d" not in item:
+            raise ValueError(f"{name}: expected a dict with 'd' and any of "
+                             f"{', '.join(repr(k) for k in _SURFACE_KEYS[1:])}, got {item!r}")
+        unknown = sorted(set(item) - set(_SURFACE_KEYS))
         if unknown:
             raise ValueError(f"{name}: unknown key(s) {', '.join(unknown)}; valid: "
-                             f"{', '.join(_PROP_KEYS)}")
-        box = prop.get("box")
+                             f"{', '.join(_SURFACE_KEYS)}")
+        box = item.get("box")
         if box is not None:
             box = tuple(float(v) for v in box)
             if len(box) != 4 or not box[2] > 0 or not box[3] > 0:
                 raise ValueError(f"{name}: box: expected (cx, cy, rx, ry) with radii > 0, "
-                                 f"got {prop['box']!r}")
-        outline = prop.get("outline", "rectangle")
+                                 f"got {item['box']!r}")
+        outline = item.get("outline", "rectangle")
         if outline not in OUTLINES:
             raise ValueError(f"{name}: outline: unknown {outline!r}; valid: {', '.join(OUTLINES)}")
-        surfaces.append(_Surface(_theta(prop["d"], f"{name}: d"), box, outline))
+        angle = item.get("angle", 0.0)
+        if not isinstance(angle, (int, float)) or not math.isfinite(angle):
+            raise ValueError(f"{name}: angle: expected a finite number of degrees, got {angle!r}")
+        surfaces.append(_Surface(_theta(item["d"], f"{name}: d"), box, outline, float(angle)))
     return surfaces
+
+
+def _pad(surfaces: list, width: int, height: int) -> int:
+    """Columns rendered beyond each side of the image: the largest |disparity| + 4."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    return int(math.ceil(max(np.abs(_disparity(s.theta, x, y)).max() for s in surfaces))) + 4
 
 
 def _geometry(spec: SceneSpec) -> tuple:
@@ -296,10 +386,9 @@ def _geometry(spec: SceneSpec) -> tuple:
     w, h = int(spec.width), int(spec.height)
     ellipse = tuple(float(v) for v in (spec.ellipse if spec.ellipse is not None
                                        else (w / 2, h / 2, 0.25 * w, 0.29 * h)))
-    surfaces = [_Surface(_theta(spec.d_bg, "d_bg")), *_props(spec),
+    surfaces = [_Surface(_theta(spec.d_bg, "d_bg")), *_surfaces(spec.props, "props"),
                 _Surface(_theta(spec.d_fg, "d_fg"), ellipse, spec.outline)]
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-    pad = int(math.ceil(max(np.abs(_disparity(s.theta, x, y)).max() for s in surfaces))) + 4
+    pad = _pad(surfaces, w, h)
     _check(spec, surfaces, ellipse, pad)
     return surfaces, ellipse, pad
 
@@ -326,10 +415,48 @@ def _paint(textures: list, index, xs, y):
     return colour
 
 
+def _render(surfaces: list, textures: list, width: int, height: int) -> tuple:
+    """Ray cast both views over ``surfaces`` (the background first, which must cover the
+    right view) painted with ``textures``.
+
+    Returns ``(left, right, seen, d_left, occ)``: the noise-free images (float64, (H, W, 3)),
+    the index of the surface each left pixel sees, its disparity, and the occlusion: the
+    left pixel's point projects outside the right image, or another surface is nearer on its
+    right-view ray."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    # Left view: the nearest surface on the pixel's own ray.
+    seen, _, d_left = _nearest(surfaces, y, lambda surface: x)
+    left = _paint(textures, seen, x, y)
+
+    # Right view: on each ray, the point of each surface that projects to it (the root of
+    # x - d(x, y) = xr); the nearest one wins.
+    if np.isnan(_source_x(surfaces[0].theta, x, y)).any():
+        raise ValueError("d_bg: the background does not cover the right view; reduce its "
+                         "curvature")
+    seen_right, xs, _ = _nearest(surfaces, y, lambda surface: _source_x(surface.theta, x, y))
+    right = _paint(textures, seen_right, xs, y)
+
+    xr = x - d_left
+    seen_there, _, d_there = _nearest(surfaces, y,
+                                      lambda surface: _source_x(surface.theta, xr, y))
+    occ = (xr < -0.5) | ((seen_there != seen) & (d_there > d_left))
+    return left, right, seen, d_left, occ
+
+
 def check_scene(**params) -> None:
     """Raise ``ValueError`` if :func:`make_scene` ``(None, **params)`` would, without
     rendering (the geometry of :class:`SceneSpec` keywords)."""
     _geometry(replace(SceneSpec(), **params))
+
+
+def _spec(cls, params: dict, function: str, extra: str = ""):
+    """``cls(**params)`` after checking that every key is one of its fields."""
+    names = {f.name for f in fields(cls)}
+    unknown = sorted(set(params) - names)
+    if unknown:
+        raise ValueError(f"{function}: unknown parameter(s) {', '.join(unknown)}; "
+                         f"valid: {extra}{', '.join(sorted(names))}")
+    return cls(**params)
 
 
 def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene:
@@ -358,16 +485,10 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
     """
     if preset is not None and preset not in PRESETS:
         raise ValueError(f"preset: unknown {preset!r}; valid: {', '.join(PRESETS)}")
-    names = {f.name for f in fields(SceneSpec)}
-    unknown = sorted(set(params) - names)
-    if unknown:
-        raise ValueError(f"make_scene: unknown parameter(s) {', '.join(unknown)}; "
-                         f"valid: seed, {', '.join(sorted(names))}")
-    spec = replace(SceneSpec(**PRESETS.get(preset, {})), **params)
+    spec = _spec(SceneSpec, {**PRESETS.get(preset, {}), **params}, "make_scene", "seed, ")
     w, h = int(spec.width), int(spec.height)
     surfaces, ellipse, pad = _geometry(spec)
     theta_bg, theta_fg = surfaces[0].theta, surfaces[-1].theta
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
 
     rng = np.random.default_rng(seed)
     box = (-pad, -1.0, w + pad, h + 1.0)
@@ -376,27 +497,8 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
     textures = [tex_bg, *(make_texture(rng, prop.get("texture"), spec.texture_cells, box,
                                        f"props[{i}]: texture")
                           for i, prop in enumerate(spec.props)), tex_fg]
-    on_object = len(surfaces) - 1
-
-    # Left view: the nearest surface on the pixel's own ray.
-    seen, _, d_left = _nearest(surfaces, y, lambda surface: x)
-    fg = seen == on_object
-    left = _paint(textures, seen, x, y)
-
-    # Right view: on each ray, the point of each surface that projects to it (the root of
-    # x - d(x, y) = xr); the nearest one wins.
-    if np.isnan(_source_x(theta_bg, x, y)).any():
-        raise ValueError("d_bg: the background does not cover the right view; reduce its "
-                         "curvature")
-    seen_right, xs, _ = _nearest(surfaces, y, lambda surface: _source_x(surface.theta, x, y))
-    right = _paint(textures, seen_right, xs, y)
-
-    # Occlusion: the left pixel's point projects outside the right image, or another surface
-    # is nearer on its right-view ray.
-    xr = x - d_left
-    seen_there, _, d_there = _nearest(surfaces, y,
-                                      lambda surface: _source_x(surface.theta, xr, y))
-    occ = (xr < -0.5) | ((seen_there != seen) & (d_there > d_left))
+    left, right, seen, d_left, occ = _render(surfaces, textures, w, h)
+    fg = seen == len(surfaces) - 1
 
     left, right = (_finish(img, spec, rng) for img in (left, right))
     roi_fg, roi_bg = band_from_foreground(fg, spec.band_radius)
@@ -418,8 +520,169 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
               "theta_bg": theta_bg.tolist(), "spec": _jsonable(asdict(spec))})
 
 
-def _finish(img: np.ndarray, spec: SceneSpec, rng) -> np.ndarray:
-    """Add the photometric noise, clip to [0, 1], quantise if asked; float32."""
+def _deepest_pixel(mask: np.ndarray) -> tuple:
+    """``(x, y)`` of the pixel of ``mask`` (H, W) farthest inside it: of its last non-empty
+    erosion (4-neighbour; outside the image is outside the mask), the pixel nearest that
+    erosion's centroid."""
+    core = mask.copy()
+    while True:
+        inner = core.copy()
+        inner[1:] &= core[:-1]
+        inner[:-1] &= core[1:]
+        inner[:, 1:] &= core[:, :-1]
+        inner[:, :-1] &= core[:, 1:]
+        inner[[0, -1]] = False
+        inner[:, [0, -1]] = False
+        if not inner.any():
+            break
+        core = inner
+    ys, xs = np.nonzero(core)
+    i = int(np.argmin((xs - xs.mean()) ** 2 + (ys - ys.mean()) ** 2))
+    return float(xs[i]), float(ys[i])
+
+
+def _on_mask(point, mask: np.ndarray) -> bool:
+    """Whether ``point`` is two finite numbers ``(x, y)`` whose nearest pixel is in ``mask``."""
+    try:
+        x, y = (float(v) for v in point)
+    except (TypeError, ValueError):
+        return False
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return False
+    ix, iy = int(round(x)), int(round(y))
+    return 0 <= iy < mask.shape[0] and 0 <= ix < mask.shape[1] and bool(mask[iy, ix])
+
+
+def object_band(fg_left, nearer, other_occ, radius: int = BAND_RADIUS) -> tuple:
+    """The evaluation band of one object among several (``docs/scene-format.md``).
+
+    The object's own boundary is its visible pixels with a left or right neighbour that lies
+    behind it (neither the object nor ``nearer``): an edge against a nearer object belongs to
+    that object.  The band is every pixel within ``radius`` columns of it (same row), minus
+    ``nearer`` pixels and ``other_occ``, the occlusions another object causes.  With nothing
+    nearer and no other occlusion it is :func:`~lss_kernels.metrics.band_from_foreground`.
+
+    Parameters
+    ----------
+    fg_left : ndarray, bool, shape (H, W)
+        The object's visible pixels (left view).
+    nearer : ndarray, bool, shape (H, W)
+        Pixels of other surfaces nearer than the object's surface there.
+    other_occ : ndarray, bool, shape (H, W)
+        Pixels hidden from the right camera by a surface other than the object.
+    radius : int
+        Half-width of the band in pixels.
+
+    Returns
+    -------
+    boundary, roi_fg, roi_bg : ndarray, bool, shape (H, W)
+        The own boundary and the object's and the background's parts of the band.
+    """
+    behind = ~fg_left & ~nearer
+    boundary = np.zeros_like(fg_left)
+    boundary[:, :-1] |= fg_left[:, :-1] & behind[:, 1:]
+    boundary[:, 1:] |= fg_left[:, 1:] & behind[:, :-1]
+    band = _dilate_rows(boundary, int(radius)) & ~other_occ
+    return boundary, band & fg_left, band & behind
+
+
+def make_multi_scene(*, seed: int = 0, **params) -> Scene:
+    """Render a scene of several objects at different depths with exact ground truth.
+
+    The views are ray cast as in :func:`make_scene`, over the background and
+    ``MultiSpec.objects``; one of them is the clicked object, whose boundary, occlusions and
+    depth are to be found among the others, before and behind it.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the textures and the noise; equal seeds give identical scenes.
+    **params
+        :class:`MultiSpec` fields (``objects`` at least).
+
+    Returns
+    -------
+    Scene
+        ``left``, ``right``, ``disp_left`` (the visible surface) as in :func:`make_scene`;
+        ``occ_left``: every left pixel hidden from the right camera, whatever hides it;
+        ``layers_left`` uint8 (H, W): the index of the surface each left pixel sees (0 the
+        background, ``k + 1`` for ``objects[k]``); ``fg_left``: the clicked object's visible
+        pixels; ``boundary``, ``roi_fg``, ``roi_bg`` its band (:func:`object_band`), where
+        ``other_occ`` is the occlusion not caused by the clicked object nor by the left image
+        border; ``init_point``; ``init_ellipse`` None; ``d_max``; ``meta`` the seed, the
+        spec and, per object, its name, coefficients, box, outline, angle and visible pixels.
+    """
+    spec = _spec(MultiSpec, params, "make_multi_scene", "seed, ")
+    _check_image(spec)
+    if not spec.objects:
+        raise ValueError("objects: expected at least one object, got none")
+    if len(spec.objects) > 255:
+        raise ValueError(f"objects: expected at most 255 (8-bit layer indices), got "
+                         f"{len(spec.objects)}")
+    if not isinstance(spec.clicked, int) or not 0 <= spec.clicked < len(spec.objects):
+        raise ValueError(f"clicked: expected an index in objects (0..{len(spec.objects) - 1}), "
+                         f"got {spec.clicked!r}")
+    w, h = int(spec.width), int(spec.height)
+    surfaces = [_Surface(_theta(spec.d_bg, "d_bg")), *_surfaces(spec.objects, "objects")]
+    pad = _pad(surfaces, w, h)
+    _check_surfaces(surfaces, ["d_bg", *(f"objects[{i}]: d" for i in range(len(spec.objects)))],
+                    w, h, pad)
+
+    rng = np.random.default_rng(seed)
+    box = (-pad, -1.0, w + pad, h + 1.0)
+    textures = [make_texture(rng, spec.texture_bg, spec.texture_cells, box, "texture_bg"),
+                *(make_texture(rng, item.get("texture"), spec.texture_cells, box,
+                               f"objects[{i}]: texture") for i, item in enumerate(spec.objects))]
+    left, right, seen, d_left, occ = _render(surfaces, textures, w, h)
+    clicked = surfaces[spec.clicked + 1]
+    fg = seen == spec.clicked + 1
+    if not fg.any():
+        raise ValueError(f"clicked: objects[{spec.clicked}] is hidden by nearer objects in "
+                         f"the left view")
+
+    # The clicked object's own occlusions: it holds a nearer point on the right-view ray of a
+    # pixel that is not its own (it does not fold, so it never hides itself).
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    xr = x - d_left
+    xk = _source_x(clicked.theta, xr, y)
+    own_occ = ~fg & clicked.covers(xk, y) & (_disparity(clicked.theta, xk, y) > d_left)
+    nearer = ~fg & (d_left > _disparity(clicked.theta, x, y))
+    boundary, roi_fg, roi_bg = object_band(fg, nearer, occ & ~own_occ & (xr >= -0.5),
+                                           spec.band_radius)
+
+    if spec.init_point is None and not (fg & ~occ).any():
+        raise ValueError(f"clicked: objects[{spec.clicked}] is hidden from the right camera "
+                         f"wherever the left one sees it; give init_point")
+    point = _deepest_pixel(fg & ~occ) if spec.init_point is None else spec.init_point
+    if not _on_mask(point, fg):
+        raise ValueError(f"init_point: expected (x, y) on a visible pixel of the clicked "
+                         f"object, got {spec.init_point!r}")
+    need = float(d_left.max()) + 2.0
+    step = int(spec.d_max_step)
+    d_max = float(step * math.ceil(need / step)) if spec.d_max is None else float(spec.d_max)
+    if d_max < need:
+        raise ValueError(f"d_max: expected at least max(disp_left) + 2 = {need:.4g}, "
+                         f"got {spec.d_max}")
+    objects = [{"name": item.get("name", f"object {i}"), "layer": i + 1,
+                "theta": surface.theta.tolist(),
+                "box": None if surface.box is None else list(surface.box),
+                "outline": surface.outline, "angle": surface.angle,
+                "visible_px": int((seen == i + 1).sum())}
+               for i, (item, surface) in enumerate(zip(spec.objects, surfaces[1:]))]
+    left, right = (_finish(img, spec, rng) for img in (left, right))
+    return Scene(
+        name=f"multi_seed{seed}", left=left, right=right, d_max=d_max, init_ellipse=None,
+        init_point=tuple(float(v) for v in point), disp_left=d_left.astype(np.float32),
+        fg_left=fg, occ_left=occ, roi_fg=roi_fg, roi_bg=roi_bg, boundary=boundary,
+        layers_left=seen.astype(np.uint8),
+        meta={"generator": "lss_kernels.scenes", "kind": "multi", "seed": int(seed),
+              "clicked": spec.clicked, "theta_bg": surfaces[0].theta.tolist(),
+              "objects": objects, "spec": _jsonable(asdict(spec))})
+
+
+def _finish(img: np.ndarray, spec, rng) -> np.ndarray:
+    """Add the photometric noise of ``spec`` (a :class:`SceneSpec` or :class:`MultiSpec`),
+    clip to [0, 1], quantise if asked; float32."""
     if spec.noise > 0:
         img = img + rng.normal(0.0, spec.noise, img.shape)
     img = np.clip(img, 0.0, 1.0)
@@ -444,7 +707,17 @@ def write_scene(folder, preset: str | None = "easy", *, seed: int = 0, name: str
     ``name`` replaces the scene's name and ``meta`` is merged into its ``meta`` (both are
     written to ``meta.json``).
     """
-    scene = make_scene(preset, seed=seed, **params)
+    return _save(folder, make_scene(preset, seed=seed, **params), name, meta)
+
+
+def write_multi_scene(folder, *, seed: int = 0, name: str | None = None,
+                      meta: dict | None = None, **params) -> Scene:
+    """:func:`make_multi_scene` then :func:`lss_kernels.io.save_scene`, as :func:`write_scene`."""
+    return _save(folder, make_multi_scene(seed=seed, **params), name, meta)
+
+
+def _save(folder, scene: Scene, name: str | None, meta: dict | None) -> Scene:
+    """Rename ``scene`` (unless ``name`` is None), merge ``meta`` into its meta, save it."""
     if name is not None:
         scene.name = name
     scene.meta.update(meta or {})

@@ -13,14 +13,20 @@ holds ``family`` and ``description``.
 
 Examples
 --------
->>> folders = write_stress_set("/tmp/stress", seed=0, size="small")
+>>> folders = write_stress_set("DIR", seed=0, size="small")
 
 :func:`random_specs` draws scenes at random over the generator's dimensions instead (no
 family: what no one thought to test).
 
+:func:`multi_specs` is a separate family, not in the stress set: whole photos, eight scenes of
+4-6 objects at different depths (:func:`lss_kernels.scenes.make_multi_scene`), each with one
+clicked object and its click (``init_point``), scored on the band around that object only
+(``docs/scene-format.md``).  Its geometry is written for the "photo" size (672x560, d_max
+128) and scaled to "medium" (336x280, d_max 64) and "small" (168x140, d_max 32).
+
 Command line::
 
-    python -m lss_kernels.stress OUT [--seed S] [--size small|medium] [--random N]
+    python -m lss_kernels.stress OUT [--seed S] [--size small|medium|photo] [--random N | --multi]
 """
 from __future__ import annotations
 
@@ -30,9 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .scenes import OUTLINES, check_scene, disparity_coefficients, write_scene
+from .scenes import OUTLINES, check_scene, disparity_coefficients, write_multi_scene, write_scene
 
-__all__ = ["SIZES", "STRESS_FAMILIES", "random_specs", "stress_specs", "write_stress_set"]
+__all__ = ["MULTI_FAMILY", "MULTI_SIZES", "SIZES", "STRESS_FAMILIES", "multi_specs",
+           "random_specs", "stress_specs", "write_stress_set"]
 
 #: What each family tests.
 STRESS_FAMILIES = {
@@ -347,13 +354,209 @@ def random_specs(seed: int = 0, count: int = 24, size: str = "medium") -> list:
     return specs
 
 
-def write_stress_set(out_dir, seed: int = 0, size: str = "medium", random: int = 0) -> list:
+# ------------------------------------------------------------------------------ multi
+#: Image sizes (width, height) of the multi-object family (:func:`multi_specs`); its geometry
+#: is written for "photo" and scaled with the image.
+MULTI_SIZES = {"small": (168, 140), "medium": (336, 280), "photo": (672, 560)}
+
+#: What the multi-object family tests.
+MULTI_FAMILY = ("3-6 objects at different depths over slanted or curved walls, shelves and "
+                "floors; objects partly in front of the clicked one, thin rods and handles "
+                "across it, a neighbour a few pixels behind it, a weakly textured object; "
+                "each surface with one of the package's textures")
+
+_MULTI_D_MAX = 128.0                        # photo pixels, scaled with the image
+_PHOTO_CENTRE = (336.0, 280.0)
+_ROD = 4.0                                  # half-width of rods and handles, photo pixels
+
+
+def _obj(name: str, d, box, outline: str = "rectangle", angle: float = 0.0, **extra) -> dict:
+    """An object of a multi scene in photo pixels: ``d`` as :func:`_layer` (about the box's
+    centre), ``box`` ``(cx, cy, rx, ry)`` or None (a whole plane, about the image centre)."""
+    return {"name": name, "d": d, "box": box, "outline": outline, "angle": angle, **extra}
+
+
+def _rod(name: str, d, cx: float, cy: float, half_length: float, angle: float) -> dict:
+    """A rod or a handle: a rectangle ``2 * _ROD`` pixels wide turned by ``angle`` degrees."""
+    return _obj(name, d, (cx, cy, half_length, _ROD), angle=angle, thin=True)
+
+
+def _multi_scenes(rng) -> list:
+    """The family's scenes as ``(variant, description, parameters in photo pixels)``; the
+    parameters hold ``d_bg``, ``objects`` and ``clicked`` (an index in ``objects``)."""
+    return [
+        ("front_box", "an ellipse at 64 px, its lower left covered by a box at 96 px; a shelf "
+                      "at 36 px and a blob at 44 px behind; a slanted wall",
+         {"d_bg": {"d": 24, "slope": (-0.02, 0.01)}, "clicked": 1, "objects": [
+             _obj("shelf", 36, (150.0, 300.0, 150.0, 200.0)),
+             _obj("ellipse", {"d": 64, "slope": (0.03, -0.02)}, (340.0, 260.0, 110.0, 95.0),
+                  "ellipse"),
+             _obj("front box", 96, (250.0, 385.0, 80.0, 70.0)),
+             _obj("blob", 44, (560.0, 170.0, 60.0, 60.0), "blob")]}),
+        ("rod", "a blob at 70 px crossed by a rod 8 px wide at 104 px; boxes at 46 and 52 px "
+                "behind; a cylinder wall",
+         {"d_bg": {"d": 30, "curvature": (-0.00015, 0.0, 0.0)}, "clicked": 0, "objects": [
+             _obj("blob", 70, (330.0, 290.0, 120.0, 120.0), "blob"),
+             _rod("rod", 104, 340.0, 270.0, 330.0, 25.0),
+             _obj("box", 46, (110.0, 430.0, 80.0, 100.0)),
+             _obj("ellipse", 52, (570.0, 150.0, 70.0, 60.0), "ellipse")]}),
+        ("neighbour", "an ellipse at 72 px; a box 6 px behind it touches it on the left (its "
+                      "occlusion strip falls on the box); a floor; an ellipse at 100 px covers "
+                      "its lower right",
+         {"d_bg": {"d": 20, "slope": (0.02, 0.0)}, "clicked": 2, "objects": [
+             _obj("neighbour", 66, (240.0, 300.0, 70.0, 110.0)),
+             _obj("floor", {"d": 20 - 0.15 * (420 - 280), "slope": (0.0, 0.15)}, None),
+             _obj("ellipse", 72, (380.0, 280.0, 95.0, 120.0), "ellipse"),
+             _obj("front ellipse", 100, (460.0, 380.0, 55.0, 70.0), "ellipse")]}),
+        ("weak", "an L of 12 grey levels at 60 px, slanted; a bar at 92 px across its top, a "
+                 "box at 84 px over its right, a box at 40 px behind",
+         {"d_bg": {"d": 26, "slope": (-0.015, 0.02)}, "clicked": 0, "objects": [
+             _obj("weak L", {"d": 60, "slope": (0.02, 0.01)}, (320.0, 280.0, 120.0, 110.0), "L",
+                  texture={"kind": "low_contrast", "amplitude": 12 / 255,
+                           "brightness": 0.45}),
+             _obj("box behind", 40, (140.0, 130.0, 90.0, 70.0)),
+             _rod("bar", 92, 330.0, 200.0, 90.0, -10.0),
+             _obj("front box", 84, (480.0, 370.0, 70.0, 90.0))]}),
+        ("curved", "a ball at 76 px on a bowl-shaped wall; a blob at 58 px behind its left, a "
+                   "box at 108 px over its lower right, a rod at 96 px across its left, an "
+                   "ellipse at 54 px",
+         {"d_bg": {"d": 40, "curvature": (-0.0001, 0.0, -0.0001)}, "clicked": 1, "objects": [
+             _obj("blob behind", 58, (200.0, 330.0, 90.0, 90.0), "blob"),
+             _obj("ball", {"d": 76, "curvature": (-0.0002, 0.0, -0.0002)},
+                  (330.0, 260.0, 100.0, 100.0), "ellipse"),
+             _obj("front box", 108, (445.0, 345.0, 60.0, 60.0)),
+             _rod("rod", 96, 250.0, 280.0, 280.0, 82.0),
+             _obj("ellipse", 54, (580.0, 140.0, 55.0, 80.0), "ellipse")]}),
+        ("shelves", "a box at 62 px standing on a plank at 48 px, a handle at 80 px across "
+                    "it; a floor meets the wall; a box at 44 px and an ellipse at 88 px",
+         {"d_bg": 18, "clicked": 2, "objects": [
+             _obj("floor", {"d": 18 - 0.16 * (430 - 280), "slope": (0.0, 0.16)}, None),
+             _obj("plank", 48, (336.0, 252.0, 336.0, 8.0)),
+             _obj("box", 62, (300.0, 170.0, 80.0, 72.0)),
+             _rod("handle", 80, 330.0, 170.0, 100.0, 60.0),
+             _obj("low box", 44, (470.0, 360.0, 90.0, 60.0)),
+             _obj("front ellipse", 88, (120.0, 340.0, 60.0, 50.0), "ellipse")]}),
+        ("handle", "an L at 68 px with a bent handle (two rods at 100 px) before it and an "
+                   "ellipse 8 px behind it on its right; a box at 38 px",
+         {"d_bg": {"d": 22, "slope": (0.0, -0.02)}, "clicked": 0, "objects": [
+             _obj("L", 68, (300.0, 290.0, 115.0, 120.0), "L"),
+             _obj("neighbour", 60, (470.0, 300.0, 60.0, 110.0), "ellipse"),
+             _rod("handle, left", 100, 230.0, 240.0, 70.0, 60.0),
+             _rod("handle, top", 100, 330.0, 180.0, 90.0, -15.0),
+             _obj("box", 38, (120.0, 450.0, 90.0, 70.0))]}),
+        ("stack", "a blob at 74 px covered on the left by a box at 98 px and on the right by "
+                  "an ellipse at 90 px, crossed by a rod at 112 px; an ellipse at 54 px "
+                  "behind it and a shelf at 40 px; a slanted, curved wall",
+         {"d_bg": {"d": 28, "slope": (0.015, 0.01), "curvature": (0.0, 0.0, -0.00008)},
+          "clicked": 2, "objects": [
+             _obj("shelf", 40, (520.0, 200.0, 150.0, 140.0)),
+             _obj("ellipse behind", 54, (330.0, 180.0, 90.0, 70.0), "ellipse"),
+             _obj("blob", 74, (340.0, 320.0, 110.0, 110.0), "blob"),
+             _obj("front box", 98, (200.0, 365.0, 70.0, 80.0)),
+             _obj("front ellipse", 90, (475.0, 400.0, 55.0, 65.0), "ellipse"),
+             _rod("rod", 112, 336.0, 280.0, 340.0, -35.0)]}),
+    ]
+
+
+def _multi_texture(rng) -> dict:
+    """A texture for a surface without its own, of the package's four kinds equally likely:
+    tinted value noise of contrast 0.4-0.8, a palette of 3-5 colours in blobs of 4-12 px,
+    10-30 grey levels (weak), or stripes of period 4-10 px turned by up to 30 degrees with
+    10-30 % of noise mixed in."""
+    kind = int(rng.integers(4))
+    if kind == 0:
+        contrast = float(rng.uniform(0.4, 0.8))
+        return {"kind": "random", "tint": float(rng.uniform(0.1, 0.3)), "contrast": contrast,
+                "low": (1.0 - contrast) / 2}
+    if kind == 1:
+        return _palette(rng, int(rng.integers(3, 6)), float(rng.uniform(4.0, 12.0)))
+    if kind == 2:
+        return _weak(float(rng.uniform(10.0, 30.0)), float(rng.uniform(0.15, 0.6)))
+    return _stripes(rng.uniform(4.0, 10.0), angle=float(rng.uniform(-30.0, 30.0)),
+                    mix=float(rng.uniform(0.1, 0.3)))
+
+
+def _multi_placed(params: dict, rng, scale: float) -> dict:
+    """make_multi_scene keywords from a scene's photo-size parameters: every object moved by
+    up to 10 px and resized by up to 6 % (rods keep their width), rods turned by up to 5
+    degrees, all objects moved by one common 0-3 px in depth, then scaled to the image."""
+    shift = rng.uniform(-3.0, 3.0)
+    objects = []
+    for item in params["objects"]:
+        item = dict(item)
+        thin = item.pop("thin", False)
+        layer = item["d"] if isinstance(item["d"], dict) else {"d": item["d"]}
+        layer = {**layer, "d": layer["d"] + shift}
+        centre = _PHOTO_CENTRE
+        if item["box"] is not None:
+            cx, cy, rx, ry = item["box"]
+            centre = (cx, cy)
+            cx, cy = cx + rng.uniform(-10, 10), cy + rng.uniform(-10, 10)
+            rx, ry = rx * rng.uniform(0.94, 1.06), ry * (1.0 if thin else rng.uniform(0.94, 1.06))
+            item["box"] = (cx * scale, cy * scale, rx * scale, ry * scale)
+        if thin:
+            item["angle"] += rng.uniform(-5.0, 5.0)
+        item["d"] = _layer(layer, scale, centre)
+        if "texture" not in item:
+            item["texture"] = _multi_texture(rng)
+        objects.append(item)
+    return {"d_bg": _layer(params["d_bg"], scale, _PHOTO_CENTRE), "objects": tuple(objects),
+            "clicked": params["clicked"], "texture_bg": _multi_texture(rng),
+            "noise": float(rng.uniform(2.0, 5.0)) / 255, "d_max": _MULTI_D_MAX * scale}
+
+
+def multi_specs(seed: int = 0, size: str = "medium") -> list:
+    """The multi-object scenes as ``(name, keywords)``: ``write_multi_scene(folder,
+    name=name, **keywords)`` renders one (:func:`lss_kernels.scenes.make_multi_scene`).
+
+    Eight scenes of 4-6 objects (:data:`MULTI_FAMILY`), each with a clicked object and its
+    click (``init_point``: the pixel deepest inside its part seen by both cameras); noise of
+    2-5 grey levels; ``d_max`` 128 at the "photo" size, scaled with the image.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the placements, the textures and the noise; equal seeds give identical scenes.
+    size : str
+        A key of :data:`MULTI_SIZES`.
+
+    Returns
+    -------
+    list of (str, dict)
+        Names ``multi_VARIANT``.
+    """
+    if size not in MULTI_SIZES:
+        raise ValueError(f"size: unknown {size!r} for the multi family; valid: "
+                         f"{', '.join(MULTI_SIZES)}")
+    width, height = MULTI_SIZES[size]
+    scale = width / MULTI_SIZES["photo"][0]
+    rng = np.random.default_rng([int(seed), 2])
+    specs = []
+    for variant, description, params in _multi_scenes(rng):
+        keywords = _multi_placed(params, rng, scale)
+        keywords.update(width=width, height=height, seed=int(seed) * 1000 + len(specs),
+                        meta={"family": "multi", "description": description,
+                              "stress_seed": int(seed), "size": size})
+        specs.append((f"multi_{variant}", keywords))
+    return specs
+
+
+def write_stress_set(out_dir, seed: int = 0, size: str = "medium", random: int = 0,
+                     multi: bool = False) -> list:
     """Write every scene of :func:`stress_specs` (or, with ``random`` > 0, of
-    :func:`random_specs` with that count) into ``out_dir/NAME``; returns the folders."""
+    :func:`random_specs` with that count; with ``multi``, of :func:`multi_specs`) into
+    ``out_dir/NAME``; returns the folders."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"out_dir: {out} exists and is not a folder")
+    if multi and random > 0:
+        raise ValueError(f"random: the multi family has no random draws, got random={random}")
     folders = []
+    if multi:
+        for name, keywords in multi_specs(seed, size):
+            write_multi_scene(out / name, name=name, **keywords)
+            folders.append(out / name)
+        return folders
     specs = random_specs(seed, random, size) if random > 0 else stress_specs(seed, size)
     for name, keywords in specs:
         write_scene(out / name, None, name=name, **keywords)
@@ -369,25 +572,32 @@ class _Parser(argparse.ArgumentParser):
 
 
 def main(argv=None) -> int:
-    """``python -m lss_kernels.stress OUT [--seed S] [--size small|medium] [--random N]``."""
+    """``python -m lss_kernels.stress OUT [--seed S] [--size SIZE] [--random N | --multi]``."""
     parser = _Parser(prog="python -m lss_kernels.stress",
                      description="Write the stress set of hard rendered two-layer scenes "
                                  "(docs/stress.md) as scene folders under OUT.")
     parser.add_argument("out", metavar="OUT", help="output folder (created if needed)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the set (default 0)")
-    parser.add_argument("--size", choices=list(SIZES), default="medium",
-                        help="image size: small 160x120, medium 320x240 (default)")
+    parser.add_argument("--size", choices=sorted({*SIZES, *MULTI_SIZES}), default="medium",
+                        help="image size: small 160x120, medium 320x240 (default); with "
+                             "--multi small 168x140, medium 336x280, photo 672x560")
     parser.add_argument("--random", type=int, default=0, metavar="N",
                         help="N scenes drawn at random instead of the families")
+    parser.add_argument("--multi", action="store_true",
+                        help="the multi-object family instead (whole photos: one clicked "
+                             "object among others, docs/scene-format.md)")
     args = parser.parse_args(argv)
     if args.random < 0:
         parser.error(f"--random: expected a number of scenes >= 0, got {args.random}")
+    if args.multi and args.random:
+        parser.error("--multi: not with --random")
     try:
-        folders = write_stress_set(args.out, args.seed, args.size, args.random)
+        folders = write_stress_set(args.out, args.seed, args.size, args.random, args.multi)
     except (ValueError, OSError) as exc:
         print(f"{parser.prog}: error: {exc}", file=sys.stderr)
         return 1
-    kind = "random" if args.random else f"{len(STRESS_FAMILIES)} families"
+    kind = ("random" if args.random else "multi-object" if args.multi
+            else f"{len(STRESS_FAMILIES)} families")
     print(f"wrote {len(folders)} scenes ({kind}, {args.size}, seed {args.seed}) to {args.out}")
     return 0
 

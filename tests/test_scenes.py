@@ -1,10 +1,12 @@
-"""Rendered two-layer scenes: the images agree with their exact ground truth."""
+"""Rendered scenes (two layers, or several objects): the images agree with their exact ground
+truth."""
 import numpy as np
 import pytest
 
 from lss_kernels.io import load_scene
 from lss_kernels.metrics import band_from_foreground, boundary_from_foreground, score
-from lss_kernels.scenes import PRESETS, disparity_coefficients, make_scene, write_scene
+from lss_kernels.scenes import (PRESETS, disparity_coefficients, make_multi_scene, make_scene,
+                                 write_multi_scene, write_scene)
 
 
 def _grid(scene):
@@ -271,3 +273,211 @@ def test_a_floor_meets_the_wall_where_it_comes_nearer():
 def test_prop_errors_name_the_prop(props, message):
     with pytest.raises(ValueError, match=message):
         make_scene("easy", props=props)
+
+
+# ------------------------------------------------------------------------------ several objects
+def _rect(cx, cy, rx, ry, angle=0.0):
+    """The outline test of a turned rectangle, written out: ``|u|, |v| <= 1`` in its frame."""
+    a = np.radians(angle)
+
+    def inside(x, y):
+        u = (np.cos(a) * (x - cx) + np.sin(a) * (y - cy)) / rx
+        v = (np.cos(a) * (y - cy) - np.sin(a) * (x - cx)) / ry
+        return (np.abs(u) <= 1) & (np.abs(v) <= 1)
+    return inside
+
+
+def _ellipse(cx, cy, rx, ry):
+    return lambda x, y: ((x - cx) / rx) ** 2 + ((y - cy) / ry) ** 2 <= 1
+
+
+#: A slanted and curved scene of a wall and four objects: a box behind, the clicked ellipse, a
+#: turned rod before it and a box before its lower right; ``(coefficients, outline test)``.
+_WALL = disparity_coefficients(6.0, slope=(-0.02, 0.01), curvature=(-0.0004, 0.0, 0.0),
+                               centre=(48.0, 36.0))
+_OBJECTS = (
+    ({"d": disparity_coefficients(11.3, slope=(0.03, 0.0), centre=(22.7, 30.2)),
+      "box": (22.7, 30.2, 14.1, 18.3), "name": "box behind"}, _rect(22.7, 30.2, 14.1, 18.3)),
+    ({"d": disparity_coefficients(17.6, slope=(0.05, -0.02), curvature=(-0.002, 0.0, -0.001),
+                                  centre=(50.4, 35.1)),
+      "box": (50.4, 35.1, 20.3, 17.2), "outline": "ellipse", "name": "ellipse"},
+     _ellipse(50.4, 35.1, 20.3, 17.2)),
+    ({"d": 25.7, "box": (47.1, 33.3, 60.2, 2.1), "angle": 28.0, "name": "rod"},
+     _rect(47.1, 33.3, 60.2, 2.1, 28.0)),
+    ({"d": disparity_coefficients(22.2, slope=(-0.04, 0.0), centre=(70.3, 49.9)),
+      "box": (70.3, 49.9, 9.4, 8.1), "name": "front box"}, _rect(70.3, 49.9, 9.4, 8.1)),
+)
+
+
+def _slanted_multi(**extra):
+    return make_multi_scene(width=96, height=72, d_bg=_WALL, objects=[o for o, _ in _OBJECTS],
+                            clicked=1, seed=5, **extra)
+
+
+def _root(theta, xr, y, lo, hi):
+    """Left-view x of ``x - d(x, y) = xr`` by bisection (``x - d`` increases along x)."""
+    lo, hi = np.full_like(xr, lo), np.full_like(xr, hi)
+    for _ in range(80):
+        mid = (lo + hi) / 2
+        right = mid - (_u(mid, y) @ theta) > xr
+        lo, hi = np.where(right, lo, mid), np.where(right, mid, hi)
+    return (lo + hi) / 2
+
+
+def test_several_objects_follow_a_numpy_ray_cast():
+    """Left view: each pixel sees the nearest surface holding it.  Occlusion: a left pixel is
+    hidden exactly when its right-view ray, solved here by bisection, meets a nearer surface,
+    or leaves the image."""
+    scene = _slanted_multi()
+    y, x = _grid(scene)
+    x, y = x.astype(np.float64), y.astype(np.float64)
+    thetas = [np.array(_WALL)] + [np.array(o["d"]) if np.ndim(o["d"]) else
+                                  np.array([0, 0, 0, 0, 0, o["d"]]) for o, _ in _OBJECTS]
+    covers = [lambda x, y: np.ones(np.shape(x), bool)] + [inside for _, inside in _OBJECTS]
+    d = np.stack([np.where(c(x, y), _u(x, y) @ t, -np.inf) for t, c in zip(thetas, covers)])
+    np.testing.assert_array_equal(scene.layers_left, d.argmax(0))
+    np.testing.assert_allclose(scene.disp_left, d.max(0), rtol=1e-6)
+    assert set(np.unique(scene.layers_left)) == {0, 1, 2, 3, 4}
+
+    d_left = scene.disp_left.astype(np.float64)
+    xr = x - d_left
+    hidden = xr < -0.5
+    for k, (theta, inside) in enumerate(zip(thetas, covers)):
+        xk = _root(theta, xr, y, -60.0, 160.0)
+        dk = _u(xk, y) @ theta
+        hidden |= (scene.layers_left != k) & inside(xk, y) & (dk > d_left + 1e-6)
+    np.testing.assert_array_equal(scene.occ_left, hidden)
+    assert (scene.occ_left & (scene.layers_left == 2)).any()   # the rod hides some of the ellipse
+
+
+def test_several_objects_keep_colours_exact():
+    """Integer disparities, no noise: a left pixel not occluded has the colour of the right
+    pixel at x - d, whatever object it shows; an occluded one (not at the border) does not."""
+    scene = make_multi_scene(width=128, height=96, d_bg=6.0, seed=2, objects=[
+        {"d": 12.0, "box": (30.0, 60.0, 14.0, 20.0), "texture": "palette"},
+        {"d": 20.0, "box": (64.0, 48.0, 24.0, 20.0), "outline": "blob"},
+        {"d": 28.0, "box": (64.0, 48.0, 70.0, 2.5), "angle": -20.0, "texture": "stripes"},
+        {"d": 26.0, "box": (88.0, 66.0, 12.0, 10.0), "outline": "ellipse"}], clicked=1)
+    y, x = _grid(scene)
+    xr = x - scene.disp_left.astype(int)
+    visible = ~scene.occ_left
+    assert (xr[visible] >= 0).all() and visible.mean() > 0.7
+    np.testing.assert_allclose(scene.left[visible], scene.right[y[visible], xr[visible]],
+                               atol=1e-5)
+    inner = scene.occ_left & (xr >= 0)
+    assert np.abs(scene.left[inner] - scene.right[y[inner], xr[inner]]).max(-1).min() > 0
+    assert set(np.unique(scene.layers_left)) == {0, 1, 2, 3, 4}
+
+
+def test_the_band_is_the_clicked_objects_own():
+    """The clicked object at 20 px (x 31..60) with a box at 30 px before its right side (x
+    57..86, rows 22..42) over a wall at 4 px: in those rows its own boundary is its left edge
+    only, the band leaves out the box and the 10 px the box hides of the object, and keeps
+    the object's own 16 px occlusion strip; elsewhere both edges are its own."""
+    scene = make_multi_scene(width=128, height=64, d_bg=4.0, seed=1, objects=[
+        {"d": 20.0, "box": (45.3, 32.0, 15.0, 20.0), "name": "clicked"},
+        {"d": 30.0, "box": (71.3, 32.0, 15.0, 10.0), "name": "front box"}], clicked=0)
+    cols = lambda mask: np.flatnonzero(mask).tolist()
+    r = lambda a, b: list(range(a, b + 1))
+    assert cols(scene.layers_left[30] == 1) == r(31, 56)
+    assert cols(scene.layers_left[30] == 2) == r(57, 86)
+    np.testing.assert_array_equal(scene.fg_left, scene.layers_left == 1)
+    assert cols(scene.occ_left[30]) == r(0, 3) + r(15, 30) + r(47, 56)
+    assert cols(scene.boundary[30]) == [31] and cols(scene.boundary[15]) == [31, 60]
+    assert cols(scene.roi_fg[30]) == r(31, 46) and cols(scene.roi_bg[30]) == r(11, 30)
+    assert cols(scene.roi_fg[15]) == r(31, 60) and cols(scene.roi_bg[15]) == r(11, 30) + r(61, 80)
+    assert not ((scene.roi_fg | scene.roi_bg) & (scene.layers_left == 2)).any()
+    s = score(scene.disp_left, scene.occ_left, scene)
+    # 41 rows of the strip x 15..30, less x 30 beside the boundary (not scored)
+    assert (s["occ_f1"], s["bad4"], s["n_true_occ"]) == (1.0, 0.0, 41 * 15)
+    x, y = (int(v) for v in scene.init_point)      # deep inside its part both cameras see
+    assert (scene.fg_left & ~scene.occ_left)[y - 7:y + 8, x - 7:x + 8].all()
+
+
+def test_scoring_reads_the_clicked_objects_band_from_the_folder(tmp_path):
+    """``roi_fg.png`` / ``roi_bg.png`` carry the rule: a prediction that is wrong only on the
+    box before the object (its depth, and occlusion all over it) scores perfectly from the
+    folder, and not with the band recomputed from ``fg_left`` alone."""
+    import dataclasses
+    write_multi_scene(tmp_path / "s", seed=1, width=128, height=64, d_bg=4.0, objects=[
+        {"d": 20.0, "box": (45.3, 32.0, 15.0, 20.0)},
+        {"d": 30.0, "box": (71.3, 32.0, 15.0, 10.0)}], clicked=0)
+    scene = load_scene(tmp_path / "s")
+    front = scene.layers_left == 2
+    disparity = np.where(front, 4.0, scene.disp_left)
+    occlusion = scene.occ_left | front
+    s = score(disparity, occlusion, scene)
+    assert (s["occ_f1"], s["bad4"]) == (1.0, 0.0)
+    s = score(disparity, occlusion, dataclasses.replace(scene, roi_fg=None, roi_bg=None))
+    assert s["occ_f1"] < 0.9 and s["bad4"] > 10
+
+
+def test_one_object_gives_the_two_layer_truth():
+    """With one object before a wall, the object's band is the paper's band and the truth is
+    the two-layer scene's (only the textures are drawn in another order)."""
+    two = make_scene("slanted", outline="L", ellipse=(60.0, 50.0, 30.0, 28.0))
+    theta_fg, theta_bg = two.meta["theta_fg"], two.meta["theta_bg"]
+    multi = make_multi_scene(width=128, height=96, d_bg=theta_bg, objects=[
+        {"d": theta_fg, "box": (60.0, 50.0, 30.0, 28.0), "outline": "L"}], d_max_step=2)
+    for key in ("disp_left", "occ_left", "fg_left", "roi_fg", "roi_bg", "boundary"):
+        np.testing.assert_array_equal(getattr(multi, key), getattr(two, key), err_msg=key)
+    assert multi.d_max == two.d_max
+    np.testing.assert_array_equal(multi.layers_left, two.fg_left.astype(np.uint8))
+
+
+def test_a_multi_scene_folder_round_trips_and_starts_from_its_click(tmp_path):
+    from lss_kernels.apps.jobs import scene_init
+    from lss_kernels.model.init import Point
+    scene = write_multi_scene(tmp_path / "m", name="m", meta={"family": "test"},
+                              **{"width": 96, "height": 72, "d_bg": _WALL, "clicked": 1,
+                                 "objects": [o for o, _ in _OBJECTS], "seed": 5})
+    back = load_scene(tmp_path / "m")
+    assert back.init_ellipse is None and back.init_point == scene.init_point
+    np.testing.assert_array_equal(back.layers_left, scene.layers_left)
+    assert back.layers_left.dtype == np.uint8
+    for key in ("fg_left", "occ_left", "roi_fg", "roi_bg", "boundary"):
+        np.testing.assert_array_equal(getattr(back, key), getattr(scene, key))
+    assert back.meta["family"] == "test" and back.meta["clicked"] == 1
+    assert [o["name"] for o in back.meta["objects"]] == [o["name"] for o, _ in _OBJECTS]
+    assert scene_init(back) == (Point(*scene.init_point), "left")
+
+
+def test_multi_scenes_are_deterministic():
+    a, b, c = _slanted_multi(noise=0.01), _slanted_multi(noise=0.01), _slanted_multi()
+    np.testing.assert_array_equal(a.left, b.left)
+    assert np.abs(a.left - c.left).max() > 0
+
+
+@pytest.mark.parametrize("extra, message", [
+    ({"clicked": 4}, r"clicked: expected an index in objects \(0..3\), got 4"),
+    ({"init_point": (2.0, 2.0)}, "init_point: expected .* on a visible pixel"),
+    ({"d_max": 20.0}, r"d_max: expected at least max\(disp_left\) \+ 2"),
+    ({"colour": 1}, "make_multi_scene: unknown parameter"),
+    ({"objects": ()}, "objects: expected at least one object"),
+    ({"objects": ({"d": 5.0, "box": (10.0, 10.0, 3.0, 3.0), "angle": "x"},), "clicked": 0},
+     r"objects\[0\]: angle: expected a finite number"),
+    ({"objects": ({"d": 5.0, "box": (48.0, 36.0, 8.0, 8.0)},
+                  {"d": 9.0, "box": (48.0, 36.0, 9.0, 9.0)}), "clicked": 0},
+     r"clicked: objects\[0\] is hidden"),
+])
+def test_multi_errors(extra, message):
+    params = {"width": 96, "height": 72, "d_bg": _WALL, "clicked": 1,
+              "objects": [o for o, _ in _OBJECTS], **extra}
+    with pytest.raises(ValueError, match=message):
+        make_multi_scene(**params)
+
+
+def test_a_bad_click_or_layer_map_in_a_folder_is_named(tmp_path):
+    import json
+
+    from lss_kernels.io import write_png
+    write_multi_scene(tmp_path / "s", seed=1, width=48, height=32, d_bg=4.0, objects=[
+        {"d": 10.0, "box": (24.0, 16.0, 10.0, 8.0)}])
+    meta = json.loads((tmp_path / "s" / "meta.json").read_text())
+    (tmp_path / "s" / "meta.json").write_text(json.dumps({**meta, "init_point": [3, "x"]}))
+    with pytest.raises(ValueError, match=r"init_point: expected \[x, y\]"):
+        load_scene(tmp_path / "s")
+    (tmp_path / "s" / "meta.json").write_text(json.dumps(meta))
+    write_png(tmp_path / "s" / "layers_left.png", np.zeros((32, 48, 3), np.uint8))
+    with pytest.raises(ValueError, match="layers_left.png: expected an 8-bit gray image"):
+        load_scene(tmp_path / "s")

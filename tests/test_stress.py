@@ -6,7 +6,7 @@ import pytest
 from lss_kernels import stress
 from lss_kernels.io import list_scenes, load_scene
 from lss_kernels.metrics import score
-from lss_kernels.scenes import OUTLINES, check_scene, make_scene
+from lss_kernels.scenes import OUTLINES, check_scene, make_multi_scene, make_scene
 
 
 @pytest.fixture(scope="module")
@@ -348,3 +348,111 @@ def test_a_dark_background_is_placed_by_the_plane_sweep(ti_arch):
     assert score(swept.disparity, swept.occlusion, scene)["occ_f1"] >= 0.95
     fitted, _ = run(Params(background_sweep=0.0, max_iterations=300))
     assert not fitted.foreground.any()
+
+
+# ------------------------------------------------------------------------------ multi-object
+@pytest.fixture(scope="module")
+def multi(tmp_path_factory):
+    """The small multi-object family of seed 0, written and read back, by name."""
+    out = tmp_path_factory.mktemp("multi")
+    folders = stress.write_stress_set(out, seed=0, size="small", multi=True)
+    return {s.name: s for s in map(load_scene, folders)}
+
+
+def _on_clicked_surface(scene):
+    """The clicked object's disparity surface at every pixel (extended beyond its outline)."""
+    theta = np.array(scene.meta["objects"][scene.meta["clicked"]]["theta"])
+    y, x = np.mgrid[0:scene.disp_left.shape[0], 0:scene.disp_left.shape[1]].astype(np.float64)
+    return np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], -1) @ theta
+
+
+def test_multi_family_is_apart_from_the_stress_set(multi):
+    names = [name for name, _ in stress.stress_specs(seed=0, size="small")]
+    assert len(names) == 36 and not any(n.startswith("multi") for n in names)
+    specs = stress.multi_specs(seed=0, size="small")
+    assert len(specs) >= 8 and sorted(n for n, _ in specs) == sorted(multi)
+
+
+def test_multi_ground_truth_is_the_clicked_objects(multi):
+    """Per scene: 3-6 objects, layers_left agrees with fg_left, the click lies on the clicked
+    object where both cameras see it, the band leaves out nearer surfaces and never holds the
+    object's pixels hidden by another, and the truth scores perfectly."""
+    for name, scene in multi.items():
+        meta, (h, w) = scene.meta, scene.fg_left.shape
+        assert (w, h) == stress.MULTI_SIZES["small"] and meta["family"] == "multi", name
+        assert 3 <= len(meta["objects"]) <= 6 and meta["description"], name
+        assert scene.init_ellipse is None and scene.d_max == 32.0, name
+        assert scene.disp_left.max() + 2 <= scene.d_max and scene.disp_left.min() >= 0, name
+        assert 2 / 255 <= meta["spec"]["noise"] <= 5 / 255, name
+        np.testing.assert_array_equal(scene.fg_left, scene.layers_left == meta["clicked"] + 1)
+        assert scene.layers_left.max() == len(meta["objects"]), name
+        x, y = (int(round(v)) for v in scene.init_point)
+        assert scene.fg_left[y, x] and not scene.occ_left[y, x], name
+        nearer = ~scene.fg_left & (scene.disp_left > _on_clicked_surface(scene) + 1e-3)
+        band = scene.roi_fg | scene.roi_bg
+        assert not (band & nearer).any() and not (scene.roi_fg & scene.roi_bg).any(), name
+        np.testing.assert_array_equal(scene.roi_fg, band & scene.fg_left)
+        assert not (scene.roi_fg & scene.occ_left).any(), name
+        assert (scene.roi_bg & scene.occ_left).sum() > 50, name
+        s = score(scene.disp_left, scene.occ_left, scene)
+        assert (s["occ_f1"], s["bad4"]) == (1.0, 0.0), name
+
+
+def test_multi_family_holds_what_it_promises(multi):
+    """Objects before the clicked one in most scenes, rods, a neighbour a few pixels behind,
+    a weakly textured clicked object, a curved wall."""
+    for name, scene in multi.items():
+        fg = scene.fg_left
+        beside = fg.copy()
+        beside[1:] |= fg[:-1]
+        beside[:-1] |= fg[1:]
+        beside[:, 1:] |= fg[:, :-1]
+        beside[:, :-1] |= fg[:, 1:]
+        before = scene.disp_left > _on_clicked_surface(scene) + 1
+        assert (before & beside).sum() > 20, name     # something nearer borders the object
+    rods = [o for s in multi.values() for o in s.meta["objects"]
+            if o["box"] is not None and o["box"][3] <= 1.0 and o["box"][2] > 10]
+    assert len(rods) >= 5 and any(o["angle"] for o in rods)
+    neighbour = multi["multi_neighbour"].meta
+    gap = neighbour["objects"][2]["theta"][5] - neighbour["objects"][0]["theta"][5]
+    assert 0 < gap <= 2                                  # 6 px at the photo size
+    weak = multi["multi_weak"]
+    assert weak.meta["spec"]["objects"][weak.meta["clicked"]]["texture"]["kind"] == "low_contrast"
+    assert np.ptp(multi["multi_curved"].meta["theta_bg"][:3]) > 0
+
+
+def test_multi_family_is_deterministic_and_scales():
+    a, b = stress.multi_specs(seed=3, size="small"), stress.multi_specs(seed=3, size="small")
+    assert a == b and a != stress.multi_specs(seed=4, size="small")
+    kwargs = {k: v for k, v in a[1][1].items() if k != "meta"}
+    one, two = make_multi_scene(**kwargs), make_multi_scene(**kwargs)
+    for key in ("left", "right", "disp_left", "occ_left", "layers_left"):
+        np.testing.assert_array_equal(getattr(one, key), getattr(two, key), err_msg=key)
+    photo = dict(stress.multi_specs(seed=3, size="photo"))["multi_rod"]
+    small = dict(a)["multi_rod"]
+    assert (photo["width"], photo["height"], photo["d_max"]) == (672, 560, 128.0)
+    np.testing.assert_allclose(photo["objects"][0]["box"],
+                               4 * np.asarray(small["objects"][0]["box"]))
+    with pytest.raises(ValueError, match="size: unknown 'huge' for the multi family"):
+        stress.multi_specs(size="huge")
+
+
+def test_command_line_multi(tmp_path, capsys):
+    assert stress.main([str(tmp_path / "m"), "--multi", "--size", "small", "--seed", "1"]) == 0
+    assert len(list_scenes(tmp_path / "m")) == 8 and "multi-object" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exc:
+        stress.main([str(tmp_path / "x"), "--multi", "--random", "3"])
+    assert exc.value.code == 2 and "--multi" in capsys.readouterr().err
+    assert stress.main([str(tmp_path / "p"), "--size", "photo"]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "size: unknown 'photo'" in err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_multi_family_renders_at_every_size(seed):
+    """Seeds 0-2 give valid scenes at the medium and photo sizes (d_max 64 and 128)."""
+    for size, d_max in (("medium", 64.0), ("photo", 128.0)):
+        for name, keywords in stress.multi_specs(seed, size):
+            scene = make_multi_scene(**{k: v for k, v in keywords.items() if k != "meta"})
+            assert scene.d_max == d_max and scene.fg_left.sum() > 0.02 * scene.fg_left.size

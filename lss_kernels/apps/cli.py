@@ -43,7 +43,7 @@ def _add_solve(subparsers):
                     "overlay.png and summary.json into --out.")
     p.add_argument("images", nargs="*", metavar="LEFT RIGHT", help="left and right images")
     p.add_argument("--scene", metavar="DIR", help="scene folder (reads d_max and, when given, "
-                   "init_ellipse from meta.json)")
+                   "init_ellipse or else init_point from meta.json)")
     p.add_argument("--preset", metavar="NAME", help="a built-in rendered scene with ground "
                    "truth (easy, slanted, tiny) instead of files")
     p.add_argument("--dmax", type=float, metavar="N", help="largest disparity, left-view px")

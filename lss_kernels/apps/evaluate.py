@@ -74,9 +74,10 @@ _SOLVER = {}
 
 
 def scene_start(scene: io.Scene, init=None):
-    """``(init, frame)`` for a scene: its own ellipse (or ``auto`` without one) when ``init``
-    is None; ``"auto"``; ``"gt-point"`` / ``"gt-box"``: a point at the centroid / the bounding
-    box of the ground-truth foreground (a click, a detector), to measure those starts."""
+    """``(init, frame)`` for a scene: its own ellipse, else its click, else ``auto``
+    (:func:`~lss_kernels.apps.jobs.scene_init`) when ``init`` is None; ``"auto"``;
+    ``"gt-point"`` / ``"gt-box"``: a point at the centroid / the bounding box of the
+    ground-truth foreground (a click, a detector), to measure those starts."""
     from ..start_types import Box, Point
     from .jobs import scene_init
     if init in ("gt-point", "gt-box"):
@@ -284,7 +285,7 @@ def run_eval(dataset_dir, methods=("lss", "sgm", "bm-lr"), out="eval_out", jobs:
     scheduler : str or None
         Address of a running Dask scheduler: run there instead (``jobs`` is then unused).
     init : {None, "auto", "gt-point", "gt-box"}
-        How ``lss`` starts (:func:`scene_start`); None: each scene's own ellipse.
+        How ``lss`` starts (:func:`scene_start`); None: each scene's own ellipse or click.
 
     Returns
     -------
@@ -439,8 +440,8 @@ def add_cli(subparsers) -> None:
                         ".md (with variants of the stopping rule replayed) and .png")
     p.add_argument("--init", choices=("auto", "gt-point", "gt-box"),
                    help="start lss from auto, or from a point at the centroid / the bounding "
-                        "box of the true foreground, instead of each scene's ellipse (use its "
-                        "own --out)")
+                        "box of the true foreground, instead of each scene's ellipse or "
+                        "click (use its own --out)")
     p.add_argument("--params", choices=("default", "paper"), default="default",
                    help="lss's parameter set: default (recommended) or paper (the paper's "
                         "method and nothing beyond it, Params.paper; use its own --out)")

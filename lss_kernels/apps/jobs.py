@@ -66,13 +66,17 @@ class Job:
 
 def scene_init(scene, init=None):
     """``(init, frame)`` of a scene: ``init`` when given (left view), else the folder's
-    ellipse (cyclopean when it gives one), else ``"auto"``."""
+    ellipse (cyclopean when it gives one), else its click (``init_point``, a
+    :class:`~lss_kernels.model.init.Point`), else ``"auto"``."""
+    from ..model.init import Point
     if init is not None:
         return init, "left"
     if scene.init_ellipse_cyclopean is not None:
         return tuple(scene.init_ellipse_cyclopean), "cyclopean"
     if scene.init_ellipse is not None:
         return tuple(scene.init_ellipse), "left"
+    if scene.init_point is not None:
+        return Point(*scene.init_point), "left"
     return "auto", "left"
 
 
