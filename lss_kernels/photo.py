@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .model.init import AUTO, Box, Point
+from .start_types import Box, Point
 from .params import Params
 
 __all__ = ["FRONT_MARGIN", "MARGIN", "MAX_WINDOWS", "OUTSIDE", "REACH", "TOUCH", "Window",

@@ -68,7 +68,7 @@ def scene_init(scene, init=None):
     """``(init, frame)`` of a scene: ``init`` when given (left view), else the folder's
     ellipse (cyclopean when it gives one), else its click (``init_point``, a
     :class:`~lss_kernels.model.init.Point`), else ``"auto"``."""
-    from ..model.init import Point
+    from ..start_types import Point
     if init is not None:
         return init, "left"
     if scene.init_ellipse_cyclopean is not None:
