@@ -1,12 +1,13 @@
 """lss_kernels: two-layer level-set stereo with exact occlusion geometry (Wang & Zickler).
 
-Public API: :func:`solve`, :class:`Solver`, :class:`Params`, :class:`Result`, and the
-initialisations :class:`Point` and :class:`Box` (or ``init="auto"``).
+Public API: :func:`solve`, :class:`Solver`, :class:`Params`, :class:`Result`, the
+initialisations :class:`Point` and :class:`Box` (or ``init="auto"``), and :func:`solve_photo`
+(one object of a whole photo, :mod:`lss_kernels.photo`).
 Importing the package does not initialise Taichi; :func:`lss_kernels.kernels.backend.init` does.
 """
 from .params import Params
 
-__all__ = ["Box", "Params", "Point", "Result", "Solver", "solve", "__version__"]
+__all__ = ["Box", "Params", "Point", "Result", "Solver", "solve", "solve_photo", "__version__"]
 __version__ = "0.1.0"
 
 
@@ -15,6 +16,9 @@ def __getattr__(name):
     if name in ("Result", "Solver", "solve"):
         from . import solver
         return getattr(solver, name)
+    if name == "solve_photo":
+        from . import photo
+        return photo.solve_photo
     if name in ("Point", "Box"):
         from . import start_types
         return getattr(start_types, name)

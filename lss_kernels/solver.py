@@ -28,7 +28,7 @@ from .kernels import backend
 from .kernels.backend import FieldPool
 from .model import STAGES
 from .model.costs import BoundaryCosts
-from .model.front import FrontLayer
+from .model.front import REACH as FRONT_REACH, FrontLayer
 from .model.hierarchy import PatchHierarchy
 from .model.init import InitialRegion
 from .model.layers import FRONT, front_in_left_view, occlusion_by_layers
@@ -51,6 +51,10 @@ __all__ = ["Result", "Solver", "solve"]
 #: Widest layer in front of the object that a point's start is carried across (a rod, a
 #: handle), cyclopean pixels (:meth:`lss_kernels.model.init.InitialRegion.bridge`).
 BRIDGE_GAP = 16
+
+#: With the third layer on (a whole photo), the background's rows of Eq. 8 weigh by a
+#: Gaussian of their distance from the object's boundary, of this sigma, pixels.
+BESIDE = 24.0
 
 #: What a solver holds per disparity grid (:meth:`Solver._use`).
 _GRID = ("c_max", "pool", "extent", "left", "right", "matching", "hierarchy", "messages",
@@ -295,6 +299,9 @@ class Solver:
             if self.front.hidden[y, x] == 1:     # no evidence for either layer
                 w_fg = 0.0
                 w_bg = 0.0
+            # the background beside the object, where its occlusions fall, weighs most
+            r = phi / ti.static(self.params.phi_scale * BESIDE)
+            w_bg *= ti.exp(-0.5 * r * r)
         return ti.Vector([w_fg, w_bg])
 
     # ------------------------------------------------------------------ the iteration
@@ -332,8 +339,8 @@ class Solver:
         plane = self.sweep.run(self.iteration, p, hier.matching_cost, self.shapes, ls.phi,
                                self.occ.phi_plus, hier.consensus_mean)
         if self.front is not None:
-            self.front.update(hier.matching_cost, self.c_max, self.shapes,
-                              0.5 * p.front_margin)
+            self.front.update(hier.matching_cost, self.c_max, self.shapes, ls.phi,
+                              -FRONT_REACH * p.phi_scale, 0.5 * p.front_margin)
         t = self._stage("shapes", t)
         self.occ.compute(self.shapes, ls.phi_x, 1)
         t = self._stage("occlusion", t)

@@ -128,3 +128,8 @@ def test_demo_end_to_end_on_tiny_scene(ti_arch, tmp_path, capsys):
     assert iio.imread(out / "patch.png").ndim == 3
     assert iio.imread(out / "disparity.png").shape[:2] == (h, w)
     assert iio.imread(out / "overlay.png").shape[:2] == (h, w)
+    # the layer map over the left image: the object tinted red, the rest grey
+    layers = iio.imread(out / "layers.png").astype(int)
+    assert layers.shape[:2] == (h, w)
+    redder = (layers[..., 0] - layers[..., 2]) > 40
+    assert redder[scene.fg_left].mean() > 0.8 and redder[~scene.fg_left].mean() < 0.2

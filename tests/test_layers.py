@@ -98,16 +98,19 @@ def front_layer(ti_arch):
     layer = FrontLayer(pool, H, W)
     shapes = GlobalShapes(pool, H, W)
     cost = pool.field(ti.f32, (H, W, C))
-    ones, zeros, target = (pool.field(ti.f32, (H, W)) for _ in range(3))
+    ones, zeros, target, phi = (pool.field(ti.f32, (H, W)) for _ in range(4))
     pool.finalize()
     ones.from_numpy(np.ones((H, W), np.float32))
 
-    def run(volume, theta_1, margin):
-        target.from_numpy(np.broadcast_to(theta_1, (H, W)).astype(np.float32))
-        shapes.fit(WeightPlanes(ones, zeros), target)
+    def run(volume, theta_1, margin, theta_2=2.0, level=None, near=-1.0):
+        for weights, theta in ((WeightPlanes(ones, zeros), theta_1),
+                               (WeightPlanes(zeros, ones), theta_2)):
+            target.from_numpy(np.broadcast_to(theta, (H, W)).astype(np.float32))
+            shapes.fit(weights, target)
         cost.from_numpy(volume)
+        phi.from_numpy(np.zeros((H, W), np.float32) if level is None else level)
         layer.capture(cost, C)
-        layer.update(cost, C, shapes, margin)
+        layer.update(cost, C, shapes, phi, near, margin)
         return (layer.front.to_numpy()[:H, :W].astype(bool),
                 layer.hidden.to_numpy()[:H, :W].astype(bool))
     yield run
@@ -126,7 +129,7 @@ def test_a_rod_in_front_of_the_object_and_the_strips_it_hides(front_layer):
     assert not front[4, 2]
     # hidden: the rod and 3 columns (its jump) on either side
     assert np.flatnonzero(hidden[5]).tolist() == list(range(17, 26))
-    f_ref, h_ref = ref.front_layer(volume, theta_1, 1.0)
+    f_ref, h_ref = ref.front_layer(volume, theta_1, np.full((H, W), 2.0), 1.0)
     assert np.array_equal(front, f_ref) and np.array_equal(hidden, h_ref)
 
 
@@ -139,6 +142,33 @@ def test_a_match_that_the_object_explains_as_well_is_not_in_front(front_layer):
     volume[:, 20:23, 7] = 0.29
     front, hidden = front_layer(volume, np.full((H, W), 5.0), 1.0)
     assert not front.any() and not hidden.any()
+
+
+def test_only_pixels_near_the_object_can_be_in_front(front_layer):
+    # the rod runs on from the object (phi > 0 on columns < 24) into the background: its
+    # columns are more than 0.5 (in phi's units) from the object on rows 5 and below
+    c_true = np.full((H, W), 5.0)
+    c_true[:, 20:23] = 8.0
+    volume = _volume(c_true)
+    level = np.where(np.arange(H)[:, None] < 5, 1.0, -1.0) * np.ones((1, W))
+    front, _ = front_layer(volume, np.full((H, W), 5.0), 1.0, level=level.astype(np.float32),
+                           near=-0.5)
+    assert front[1:4, 20:23].all() and not front[5:].any()     # row 0: the 3x3 vote
+    f_ref, _ = ref.front_layer(volume, np.full((H, W), 5.0), np.full((H, W), 2.0), 1.0,
+                               phi=level, near=-0.5)
+    assert np.array_equal(front, f_ref)
+
+
+def test_a_periodic_background_explained_by_theta_2_is_not_in_front(front_layer):
+    # stripes: every pixel's cost has a tooth at Theta_2 (c = 2) and, a period on, one in
+    # front of the object (c = 9), a little deeper; the background surface explains it
+    k = np.arange(1, C + 1, dtype=np.float64)
+    curve = 0.3 - 0.28 * np.exp(-(k - 2.0) ** 2) - 0.29 * np.exp(-(k - 9.0) ** 2)
+    volume = np.broadcast_to(curve, (H, W, C)).astype(np.float32).copy()
+    front, hidden = front_layer(volume, np.full((H, W), 5.0), 1.0)
+    assert not front.any() and not hidden.any()
+    f_ref, _ = ref.front_layer(volume, np.full((H, W), 5.0), np.full((H, W), 2.0), 1.0)
+    assert not f_ref.any()
 
 
 def test_nothing_in_front_leaves_every_pixel_as_evidence(front_layer):

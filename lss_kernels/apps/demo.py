@@ -11,13 +11,16 @@ The demo steps a :class:`~lss_kernels.Solver` and every ``every`` iterations rec
 
 Outputs under ``out``: ``frames/frame_0000.png ...``, ``evolution.gif`` (loops forever; one frame
 per recorded iteration ``every, 2 every, ...`` and the final state last), ``patch.png`` (Fig. 1(a)),
-and the final ``disparity.png`` and ``overlay.png`` (left view, the input's size).
+the final ``disparity.png``, ``overlay.png`` and ``layers.png`` (the layer map over the left
+image: behind the object grey, the object red, in front of it blue; left view, the input's
+size).  ``--photo`` turns the third layer on (:mod:`lss_kernels.model.front`, as ``lss solve
+--photo`` does; the demo solves the whole image, without a window).
 
 Command line (registered by :func:`add_cli`)::
 
     lss demo [--scene DIR | LEFT RIGHT --dmax N] [--init auto|point:X,Y|box:X0,Y0,X1,Y1|ellipse:CX,CY,RX,RY|MASK.png]
              [--preset NAME] [--out DIR] [--every K] [--arch ARCH] [--patch X,Y,LEVEL]
-             [--iterations N] [--quiet]
+             [--iterations N] [--photo] [--quiet]
 """
 from __future__ import annotations
 
@@ -138,7 +141,8 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
     Returns
     -------
     dict
-        ``frames`` (list of PNG paths), ``gif``, ``patch``, ``disparity``, ``overlay``.
+        ``frames`` (list of PNG paths), ``gif``, ``patch``, ``disparity``, ``overlay``,
+        ``layers``.
     """
     import imageio.v3 as iio
 
@@ -229,12 +233,14 @@ def run_demo(left, right, d_max, init, out, every=10, max_iterations=None, patch
     init_fg = snap.get("initial_foreground")
     overlay_path = viz.save_overlay_png(os.path.join(out, "overlay.png"), left,
                                         result.foreground, result.occlusion, init_fg)
+    layers_path = viz.save_layers_png(os.path.join(out, "layers.png"), left, result.layers)
     if progress:
         print(f"{solver.iteration} iterations ({solver.stop_reason or 'cap'}) in "
               f"{time.perf_counter() - t0:.1f} s; wrote {len(frame_paths)} frames, "
-              f"{gif_path}, {patch_path}, {disp_path}, {overlay_path}", flush=True)
+              f"{gif_path}, {patch_path}, {disp_path}, {overlay_path}, {layers_path}",
+              flush=True)
     return dict(frames=frame_paths, gif=gif_path, patch=patch_path, disparity=disp_path,
-                overlay=overlay_path)
+                overlay=overlay_path, layers=layers_path)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -267,6 +273,9 @@ def add_cli(subparsers):
     p.add_argument("--patch", metavar="X,Y,LEVEL",
                    help="patch of the Fig. 1(a) plot (cyclopean pixels, level index)")
     p.add_argument("--iterations", type=int, metavar="N", help="iteration cap")
+    p.add_argument("--photo", action="store_true",
+                   help="the third layer on: what stands in front of the object is a layer of "
+                        "its own (layers.png shows it)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=main_demo)
     return p
@@ -327,9 +336,11 @@ def main_demo(args) -> int:
         print(f"lss demo: {left.shape[1]}x{left.shape[0]}, d_max {d_max:g}, arch {arch}, "
               f"output {args.out}", flush=True)
     try:
+        from ..photo import photo_params
         run_demo(left, right, d_max, init, args.out, every=args.every,
                  max_iterations=args.iterations, patch=patch, scene=scene,
-                 init_frame=init_frame, progress=not args.quiet)
+                 init_frame=init_frame, progress=not args.quiet,
+                 params=photo_params() if args.photo else None)
     except ValueError as exc:
         return _fail(str(exc).strip().splitlines()[0])
     return 0

@@ -14,8 +14,13 @@ matching cost M (the size-3 patch cost that Eq. 2 reads): the candidate of least
 object's pixels beside it: its largest patches straddle both).  A pixel is in front where
 
 * ``c*`` stands more than ``margin`` in front of Theta_1, and
-* its cost is clearly below the cost at Theta_1: ``M(Theta_1) - M(c*) > COST_GAP`` (the
-  object's surface does not explain it);
+* its cost is clearly below the costs at both surfaces: ``min(M(Theta_1), M(Theta_2)) -
+  M(c*) > COST_GAP`` (neither the object nor the background explains it; a periodic
+  background, whose matches repeat, is explained by Theta_2 as well as by any tooth);
+* it lies on the object or within ``REACH`` pixels of it (phi > -REACH phi_scale): what
+  stands in front of the object matters where it covers the object or its band; far from
+  it, a layer read from single matches would only feed on the background's ambiguities
+  (a striped wall whose pixels left Theta_2's fit would move Theta_2 and leave more);
 * and at least ``MAJORITY`` of its 3x3 window and ``SUPPORT`` of its 5x5 window are such
   pixels (stray matches, and the streaks of them in a half-occluded strip, are no layer).
 
@@ -38,12 +43,14 @@ import taichi as ti
 
 from .matching import cost_at
 
-__all__ = ["COST_GAP", "FrontLayer", "MAJORITY", "SUPPORT"]
+__all__ = ["COST_GAP", "FrontLayer", "MAJORITY", "REACH", "SUPPORT"]
 
 #: A front pixel stays one when at least this many of its 3x3 window are front pixels...
 MAJORITY = 5
 #: ... and this many of its 5x5 window.
 SUPPORT = 12
+#: How far from the object (phi's zero level) a pixel can be in front, pixels.
+REACH = 24.0
 #: How much lower than at Theta_1 a front pixel's least cost must be (M is a mean absolute
 #: difference of colours in [0, 1]).
 COST_GAP = 0.05
@@ -85,26 +92,30 @@ class FrontLayer:
 
     @ti.kernel
     def update(self, cost: ti.template(), C: ti.template(), shapes: ti.template(),
-               margin: ti.f32):
+               phi: ti.template(), near: ti.f32, margin: ti.f32):
         """``front`` and ``hidden`` for the current Theta_1 (module text); ``cost`` is M
-        (``C`` candidates), ``margin`` in cyclopean pixels."""
+        (``C`` candidates), ``phi`` the level set, ``near`` the least phi of a front pixel
+        (``-REACH`` pixels in phi's units), ``margin`` in cyclopean pixels."""
         height, width = self.extent.height(), self.extent.width()
         for y, x in self.raw:
             if y < height and x < width:
                 c = self.first[y, x]
                 th1 = shapes.value(0, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
-                gap = cost_at(cost, y, x, th1, C) - self.least[y, x]
-                self.raw[y, x] = ti.cast((c - th1 > margin) & (gap > COST_GAP), ti.i32)
+                th2 = shapes.value(1, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+                gap = ti.min(cost_at(cost, y, x, th1, C),
+                             cost_at(cost, y, x, th2, C)) - self.least[y, x]
+                self.raw[y, x] = ti.cast((c - th1 > margin) & (gap > COST_GAP)
+                                         & (phi[y, x] > near), ti.i32)
                 self.excess[y, x] = c - th1
         for y, x in self.front:
             if y < height and x < width:
-                near, votes = 0, 0
+                close, votes = 0, 0
                 for v, u in ti.ndrange((y - 2, y + 3), (x - 2, x + 3)):
                     if 0 <= v < height and 0 <= u < width:
                         votes += self.raw[v, u]
                         if ti.abs(v - y) <= 1 and ti.abs(u - x) <= 1:
-                            near += self.raw[v, u]
-                self.front[y, x] = ti.cast(self.raw[y, x] == 1 and near >= MAJORITY
+                            close += self.raw[v, u]
+                self.front[y, x] = ti.cast(self.raw[y, x] == 1 and close >= MAJORITY
                                            and votes >= SUPPORT, ti.i32)
         for y in range(height):
             reach = -1.0                      # right of a front run: x + (c* - Theta_1)

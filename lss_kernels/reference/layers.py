@@ -33,10 +33,20 @@ def occlusion_by_layers(disparity, layers, occluders=None):
     return out
 
 
-def front_layer(cost, theta_1, margin):
+def _cost_at(cost, y, x, c):
+    """M at a real candidate c (linear between candidates, clamped to [1, C])."""
+    C = cost.shape[2]
+    k = min(max(c - 1.0, 0.0), C - 1.0)
+    k0 = min(int(np.floor(k)), max(C - 2, 0))
+    t = k - k0
+    return (1 - t) * cost[y, x, k0] + t * cost[y, x, min(k0 + 1, C - 1)]
+
+
+def front_layer(cost, theta_1, theta_2, margin, phi=None, near=-np.inf):
     """``(front, hidden)`` of :class:`lss_kernels.model.front.FrontLayer` (``capture`` then
-    ``update``): ``cost`` is M, ``(H, W, C)`` over candidates c = 1 .. C, ``theta_1`` a
-    cyclopean plane, ``margin`` in cyclopean pixels."""
+    ``update``): ``cost`` is M, ``(H, W, C)`` over candidates c = 1 .. C, ``theta_1`` and
+    ``theta_2`` cyclopean planes, ``margin`` in cyclopean pixels; only pixels with ``phi >
+    near`` can be in front (default: all)."""
     cost = np.asarray(cost, np.float64)
     H, W, C = cost.shape
     best = cost.argmin(axis=2)
@@ -45,11 +55,11 @@ def front_layer(cost, theta_1, margin):
     at_theta = np.empty((H, W))
     for y in range(H):
         for x in range(W):
-            k = min(max(theta_1[y, x] - 1.0, 0.0), C - 1.0)
-            k0 = min(int(np.floor(k)), max(C - 2, 0))
-            t = k - k0
-            at_theta[y, x] = (1 - t) * cost[y, x, k0] + t * cost[y, x, min(k0 + 1, C - 1)]
+            at_theta[y, x] = min(_cost_at(cost, y, x, theta_1[y, x]),
+                                 _cost_at(cost, y, x, theta_2[y, x]))
     raw = (first - theta_1 > margin) & (at_theta - least > COST_GAP)
+    if phi is not None:
+        raw &= np.asarray(phi) > near
     front = np.zeros((H, W), bool)
     for y in range(H):
         for x in range(W):
