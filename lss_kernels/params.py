@@ -95,22 +95,11 @@ class Params:
     shape_weight_power : int
         Rows of the least-squares fit of Theta are weighted by (1 / sigma^2) ** power:
         1 is Eq. 8 of the paper, 2 is what the release does.
-    robust_fit : float
-        Huber threshold (left-view pixels) of the fits of Theta_1 and Theta_2: each
-        iteration reweights a row by min(1, k / |residual|) against the current shape
-        (iteratively reweighted least squares of a convex loss, near L1 beyond k), so that
-        the part of the other layer inside a region, or wrong matches, cannot turn a surface
-        around.  0: plain least squares, the paper's Eq. 8.
     matching_cost : {"ad", "ad_census"}
         The pixel matching cost M (:mod:`lss_kernels.model.matching`): "ad", the paper's
         absolute colour difference, or "ad_census", AD-Census (census of 7x7 grey windows
         beside the colour difference), which matches dark, low-contrast and radiometrically
         different views as sharply as bright ones.
-    exclusive_fit : bool
-        A row whose consensus lies nearer the other layer's current surface than its own
-        region's is left out of its region's fit (a hard assignment of the alternation, as
-        in k-means): a part of the object outside the current boundary, or of the
-        background inside it, does not pull the other surface.
     subpixel_messages : bool
         Eq. 5 takes d_p as an argmin over a continuous d: True refines the integer argmin to
         the vertex of the parabola through the patch cost at it and its two neighbours
@@ -201,9 +190,7 @@ class Params:
     occ_threshold: float = 0.02
     mono_threshold: float = 0.08
     shape_weight_power: int = 2
-    robust_fit: float = 0.0
     matching_cost: str = "ad"
-    exclusive_fit: bool = False
     subpixel_messages: bool = True
     refine: bool = True
     refine_passes: tuple = ((24, 7, 8), (4, 4, 2))
@@ -260,13 +247,9 @@ class Params:
         need("occ_threshold", pos, "a finite number > 0")
         need("mono_threshold", pos, "a finite number > 0")
         need("shape_weight_power", lambda v: v in (1, 2), "1 (the paper) or 2 (the release)")
-        need("robust_fit", nonneg, "a finite number >= 0 (0: plain least squares)")
         if self.matching_cost not in ("ad", "ad_census"):
             raise ValueError(f"params.matching_cost: expected 'ad' or 'ad_census', got "
                              f"{self.matching_cost!r}")
-        if not isinstance(self.exclusive_fit, bool):
-            raise ValueError(f"params.exclusive_fit: expected True or False, got "
-                             f"{self.exclusive_fit!r}")
         if not isinstance(self.subpixel_messages, bool):
             raise ValueError(f"params.subpixel_messages: expected True or False, got "
                              f"{self.subpixel_messages!r}")
@@ -313,8 +296,7 @@ class Params:
             "matching_cost": "ad", "narrow_band": 0.0, "subpixel_messages": False,
             "background_sweep": 0.0, "refine_ellipse": False, "refine": False,
             "strip_window": (0, 0), "photometric": False, "recover": False,
-            "zero_floor": False, "message_ambiguity": 0.0, "robust_fit": 0.0,
-            "exclusive_fit": False, **changes})
+            "zero_floor": False, "message_ambiguity": 0.0, **changes})
 
     def replace(self, **changes) -> "Params":
         """A copy with some fields changed (validated)."""

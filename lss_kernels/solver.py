@@ -269,10 +269,10 @@ class Solver:
     def region_weights(self, y, x):
         """The rows of Eq. 8 at pixel (y, x), ``[w_fg, w_bg]``: the consensus precision
         (1 / sigma^2, to the power ``shape_weight_power``) on the foreground (phi >= 0) and
-        on the visible background (phi < 0 and phi(x + delta_theta) < 0), 0 elsewhere,
-        times the Huber weight of the row against the current shape
-        (:meth:`GlobalShapes.huber_weight`, threshold ``robust_fit``).  Summed by
-        ``GlobalShapes.fit`` as it reads the pixels."""
+        on the visible background (phi < 0 and phi(x + delta_theta) < 0), 0 elsewhere; with
+        the third layer, 0 on the pixels it hides and the background's rows weighed by their
+        distance from the boundary (``BESIDE``).  Summed by ``GlobalShapes.fit`` as it reads
+        the pixels."""
         p = self.hierarchy.precision[y, x]
         w = p
         if ti.static(self.params.shape_weight_power != 1):
@@ -284,17 +284,12 @@ class Solver:
         xf = ti.cast(x, ti.f32)
         if xf - c < 0.0 or xf + c > self.extent.width() - 1.0:
             w = 0.0
-        k = ti.static(0.5 * self.params.robust_fit)      # left-view -> cyclopean units
         w_fg = 0.0
         w_bg = 0.0
         if phi >= 0:
-            w_fg = w * self.shapes.huber_weight(0, x, y, c, k)
-            if ti.static(self.params.exclusive_fit):
-                w_fg *= self.shapes.closer_to(0, x, y, c)
+            w_fg = w
         elif self.occ.phi_plus[y, x] < 0:
-            w_bg = w * self.shapes.huber_weight(1, x, y, c, k)
-            if ti.static(self.params.exclusive_fit):
-                w_bg *= self.shapes.closer_to(1, x, y, c)
+            w_bg = w
         if ti.static(self.params.front_margin > 0):
             if self.front.hidden[y, x] == 1:     # no evidence for either layer
                 w_fg = 0.0
@@ -333,9 +328,6 @@ class Solver:
         hier.downward()
         t = self._stage("downward", t)
         self.shapes.fit(self, hier.consensus_mean)
-        if first and p.exclusive_fit:
-            # the first fits had no shapes to exclude rows by: fit again with both
-            self.shapes.fit(self, hier.consensus_mean)
         plane = self.sweep.run(self.iteration, p, hier.matching_cost, self.shapes, ls.phi,
                                self.occ.phi_plus, hier.consensus_mean)
         if self.front is not None:

@@ -72,7 +72,6 @@ class GlobalShapes:
         self.reference = field(ti.f32, (2, NB))
         self.change = field(ti.f32, ())
         self.updated = field(ti.i32, (2,))   # the last fit changed the shape
-        self.fitted = field(ti.i32, (2,))    # the shape has been fitted at least once
         self.rows = field(ti.f32, (2,))
         # reduction levels: tiles of TILE x TILE children until one cell is left
         self.tiles = []
@@ -139,34 +138,6 @@ class GlobalShapes:
                 ti.atomic_max(self.change[None], ti.abs(dz))
         for j, a in self.theta:
             self.reference[j, a] = self.theta[j, a]
-
-    @ti.func
-    def huber_weight(self, j, x, y, d, k: ti.template()):
-        """The weight of a row of region ``j``'s fit with target ``d`` at pixel (x, y) in
-        iteratively reweighted least squares with Huber's loss of threshold ``k`` (cyclopean
-        units; a compile-time constant): min(1, k / |d - Theta_j(x, y)|) against the current
-        shape, 1 before the region's first fit (or with ``k`` = 0: plain least squares).
-        The loss is convex, so the reweighting converges to the surface that most weighted
-        rows lie on, whatever the starting shape: a part of the other layer inside a region
-        cannot turn its surface around."""
-        w = 1.0
-        if ti.static(k > 0):
-            if self.fitted[j] == 1:
-                r = ti.abs(d - self.value(j, ti.cast(x, ti.f32), ti.cast(y, ti.f32)))
-                w = ti.min(1.0, k / ti.max(r, 1e-6))
-        return w
-
-    @ti.func
-    def closer_to(self, j, x, y, d):
-        """1 when the target ``d`` at pixel (x, y) lies at least as close to Theta_j as to
-        the other shape (or the other shape has never been fitted), else 0: a row of region
-        ``j`` whose value belongs to the other layer is left out of region ``j``'s fit."""
-        keep = 1.0
-        if self.fitted[1 - j] == 1 and self.fitted[j] == 1:
-            xf, yf = ti.cast(x, ti.f32), ti.cast(y, ti.f32)
-            if ti.abs(d - self.value(j, xf, yf)) > ti.abs(d - self.value(1 - j, xf, yf)):
-                keep = 0.0
-        return keep
 
     @ti.func
     def _from_pixels(self, weights: ti.template(), target: ti.template(), out: ti.template()):
@@ -283,8 +254,6 @@ class GlobalShapes:
                 for a in ti.static(range(NB)):
                     self.theta[j, a] = sol[a]
             self.updated[j] = ok
-            if ok == 1:
-                self.fitted[j] = 1
 
     @ti.kernel
     def fit(self, weights: ti.template(), target: ti.template()):

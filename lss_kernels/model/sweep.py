@@ -155,11 +155,9 @@ class BackgroundSweep:
 
     @ti.kernel
     def _set_plane(self, shapes: ti.template(), c: ti.f32):
-        """Theta_2 := the fronto-parallel plane at cyclopean disparity ``c`` (a fitted
-        shape, for the next fit's Huber and exclusive rows)."""
+        """Theta_2 := the fronto-parallel plane at cyclopean disparity ``c``."""
         for a in range(6):
             shapes.theta[1, a] = c if a == 5 else 0.0
-        shapes.fitted[1] = 1
 
     def run(self, iteration, params, cost, shapes, phi, phi_plus, consensus):
         """After the fit of iteration ``iteration`` (1-based), when a sweep is :func:`due`:

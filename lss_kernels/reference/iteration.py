@@ -82,7 +82,6 @@ class IterationState:
     delta_theta: np.ndarray
     theta: np.ndarray
     iteration: int = 0
-    fitted: tuple = (False, False)
     extra: dict = field(default_factory=dict)
 
     @property
@@ -115,7 +114,6 @@ def state_from_solver(solver) -> IterationState:
         edge_right=f64(solver.costs.edge_right), phi=f64(solver.levelset.phi),
         D=f64(solver.levelset.D), delta_theta=f64(solver.occ.delta_theta),
         theta=solver.shapes.theta.to_numpy().astype(np.float64), iteration=int(solver.iteration),
-        fitted=tuple(bool(v) for v in solver.shapes.fitted.to_numpy()),
         extra=dict(consensus_mean=f64(h.consensus_mean), precision=prec,
                    phi_plus=f64(solver.occ.phi_plus)))
 
@@ -189,17 +187,11 @@ def iteration(state: IterationState, params):
     w = np.where((x - mean < 0) | (x + mean > W - 1), 0.0, w)
     w_fg = np.where(phi >= 0, w, 0.0)
     w_bg = np.where((phi < 0) & (phi_plus < 0), w, 0.0)
-    previous = [theta_map(t) for t in state.theta]
     theta = np.array(state.theta, np.float64, copy=True)
     updated = []
     for j, wj in enumerate((w_fg, w_bg)):
-        if state.fitted[j]:
-            wj = wj * ref.huber_weight(mean - previous[j], 0.5 * p.robust_fit)
-        if p.exclusive_fit and state.fitted[0] and state.fitted[1]:
-            wj = np.where(np.abs(mean - previous[j]) > np.abs(mean - previous[1 - j]), 0.0, wj)
         theta[j], ok = ref.fit_shape(wj, mean, theta[j])
         updated.append(ok)
-    fitted = tuple(bool(f or u) for f, u in zip(state.fitted, updated))
     plane = None
     if due(it, p):
         plane = background_sweep(state.costs[0], (phi < 0) & (phi_plus < 0),
@@ -207,7 +199,6 @@ def iteration(state: IterationState, params):
                                  p.background_sweep)
         if plane is not None:
             theta[1] = (0.0, 0.0, 0.0, 0.0, 0.0, plane)
-            fitted = (fitted[0], True)
     now = time.perf_counter()
     seconds["shapes"], t = now - t, now
 
@@ -242,7 +233,7 @@ def iteration(state: IterationState, params):
     extra = dict(consensus_mean=mean, precision=precision, d_p=d_p, sigma_p=sigma_p,
                  valid=valid, phi_plus=phi_plus, updated=updated, plane=plane, flipped=flipped,
                  area=area)
-    return replace(state, phi=phi_new, D=D, delta_theta=delta_theta, theta=theta, fitted=fitted,
+    return replace(state, phi=phi_new, D=D, delta_theta=delta_theta, theta=theta,
                    iteration=it, extra=extra), seconds
 
 

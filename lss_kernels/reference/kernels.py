@@ -17,7 +17,7 @@ from ..model import FIXED_POINT_STEPS
 
 __all__ = [
     "census", "matching_cost", "box_sum", "box_mean", "box_extreme", "patches_containing",
-    "patch_costs", "huber_weight", "patch_messages", "distinctness", "consensus",
+    "patch_costs", "patch_messages", "distinctness", "consensus",
     "median_filter", "convolve", "gaussian_derivatives", "curvature", "interp_row",
     "interp_volume", "shape_value", "basis", "fit_shape", "delta_theta", "boundary_weight",
     "levelset_step", "squared_distance", "reinitialise", "disparity", "near_pixels", "dilate",
@@ -252,14 +252,6 @@ def shape_value(theta_j, x, y, shape):
     xn, yn = _normalised(x, y, *shape)
     t = theta_j
     return t[0] * xn * xn + t[1] * xn * yn + t[2] * yn * yn + t[3] * xn + t[4] * yn + t[5]
-
-
-def huber_weight(residual, k):
-    """Weights of iteratively reweighted least squares with Huber's loss of threshold ``k``:
-    min(1, k / |residual|); all 1 for ``k = 0`` (plain least squares)."""
-    if k <= 0:
-        return np.ones_like(residual, dtype=np.float64)
-    return np.minimum(1.0, k / np.maximum(np.abs(residual), 1e-6))
 
 
 def fit_shape(weight, target, previous):
