@@ -52,10 +52,6 @@ __all__ = ["Result", "Solver", "solve"]
 #: handle), cyclopean pixels (:meth:`lss_kernels.model.init.InitialRegion.bridge`).
 BRIDGE_GAP = 16
 
-#: With the third layer on (a whole photo), the background's rows of Eq. 8 weigh by a
-#: Gaussian of their distance from the object's boundary, of this sigma, pixels.
-BESIDE = 24.0
-
 #: What a solver holds per disparity grid (:meth:`Solver._use`).
 _GRID = ("c_max", "pool", "extent", "left", "right", "matching", "hierarchy", "messages",
          "costs", "shapes", "sweep", "initialiser", "occ", "levelset", "refinement", "front")
@@ -269,9 +265,8 @@ class Solver:
     def region_weights(self, y, x):
         """The rows of Eq. 8 at pixel (y, x), ``[w_fg, w_bg]``: the consensus precision
         (1 / sigma^2, to the power ``shape_weight_power``) on the foreground (phi >= 0) and
-        on the visible background (phi < 0 and phi(x + delta_theta) < 0), 0 elsewhere; with
-        the third layer, 0 on the pixels it hides and the background's rows weighed by their
-        distance from the boundary (``BESIDE``).  Summed by ``GlobalShapes.fit`` as it reads
+        on the visible background (phi < 0 and phi(x + delta_theta) < 0), 0 elsewhere, and 0
+        on the pixels that the third layer hides.  Summed by ``GlobalShapes.fit`` as it reads
         the pixels."""
         p = self.hierarchy.precision[y, x]
         w = p
@@ -294,9 +289,6 @@ class Solver:
             if self.front.hidden[y, x] == 1:     # no evidence for either layer
                 w_fg = 0.0
                 w_bg = 0.0
-            # the background beside the object, where its occlusions fall, weighs most
-            r = phi / ti.static(self.params.phi_scale * BESIDE)
-            w_bg *= ti.exp(-0.5 * r * r)
         return ti.Vector([w_fg, w_bg])
 
     # ------------------------------------------------------------------ the iteration
