@@ -99,3 +99,37 @@ def test_photo_params_turn_the_third_layer_on_once():
     assert photo_params(Params(front_margin=6.0)).front_margin == 6.0
     with pytest.raises(ValueError, match="front_margin"):
         Params(front_margin=-1.0)
+
+
+def _rod_scene():
+    """A 400 x 128 photo: an ellipse at 16 px crossed by a rod at 26 px, a box at 12 px far to
+    its left, a wall at 6 px."""
+    from lss_kernels.scenes import make_multi_scene
+    return make_multi_scene(
+        width=400, height=128, d_bg=6.0, noise=2 / 255, seed=3, clicked=0,
+        objects=({"name": "object", "d": 16.0, "box": (300.0, 64.0, 42.0, 38.0),
+                  "outline": "ellipse"},
+                 {"name": "rod", "d": 26.0, "box": (294.0, 64.0, 90.0, 3.0), "angle": 75.0},
+                 {"name": "box", "d": 12.0, "box": (40.0, 64.0, 20.0, 30.0)}))
+
+
+@pytest.mark.slow
+def test_a_whole_photo_from_a_click(ti_arch):
+    from lss_kernels import metrics
+    from lss_kernels.model.layers import FRONT, OBJECT
+    from lss_kernels.photo import solve_photo
+    scene = _rod_scene()
+    result = solve_photo(scene.left, scene.right, scene.d_max, Point(*scene.init_point))
+    x0, y0, x1, y1 = result.window
+    assert x0 > 60 and (y0, x1, y1) == (0, 400, 128)      # the box far to the left is left out
+    assert result.disparity.shape == scene.fg_left.shape
+    assert np.isinf(result.disparity[:, :x0]).all() and (result.layers[:, :x0] == OUTSIDE).all()
+    assert set(np.unique(result.layers)) <= {0, OBJECT, FRONT, OUTSIDE}
+    score = metrics.score(result.disparity, result.occlusion, scene)
+    assert score["occ_f1"] > 0.8 and score["bad4"] < 5.0
+    fg = result.foreground
+    assert (fg & scene.fg_left).sum() / (fg | scene.fg_left).sum() > 0.85
+    # the rod over the object is the layer in front, and never the object
+    rod = (scene.layers_left == 2) & (result.layers != OUTSIDE)
+    assert (result.layers[rod] == FRONT).mean() > 0.2
+    assert not (result.foreground & (scene.layers_left == 2)).mean() > 0.02
