@@ -133,3 +133,23 @@ def test_a_whole_photo_from_a_click(ti_arch):
     rod = (scene.layers_left == 2) & (result.layers != OUTSIDE)
     assert (result.layers[rod] == FRONT).mean() > 0.2
     assert not (result.foreground & (scene.layers_left == 2)).mean() > 0.02
+
+
+@pytest.mark.slow
+def test_with_nothing_in_front_the_third_layer_changes_no_bit(ti_arch):
+    # the paper's two layers are the case of the third layer with no pixel in front: on the
+    # easy scene (one object over one wall) the model and its outputs are bit-identical
+    from lss_kernels import Solver
+    from lss_kernels.scenes import make_scene
+    scene = make_scene("easy", noise=0.01)
+    results = []
+    for margin in (0.0, FRONT_MARGIN):
+        solver = Solver(scene.left, scene.right, scene.d_max, scene.init_ellipse,
+                        params=Params(front_margin=margin))
+        results.append(solver.run())
+        solver.close()
+    two, three = results
+    assert not (three.layers == 2).any()
+    for name in ("disparity", "surface", "occlusion", "foreground", "phi", "layers"):
+        assert np.array_equal(getattr(two, name), getattr(three, name)), name
+    assert two.iterations == three.iterations
