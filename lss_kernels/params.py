@@ -163,7 +163,8 @@ class Params:
         A third layer in front of the object (:mod:`lss_kernels.model.front`): pixels whose
         first consensus stands more than this many left-view pixels in front of Theta_1, and
         the strips they hide, leave both fits and the Eq. 2 data term.  0: the paper's two
-        layers (a whole photo's solve, :mod:`lss_kernels.photo`, turns it on).
+        layers.  On the rendered multi-object family it lowers the mean occlusion F1 (see
+        ``docs/whole-photo.md``): off by default, also for a whole photo.
     """
 
     dt: float = 0.2

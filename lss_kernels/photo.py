@@ -14,14 +14,14 @@ is one of many, so:
   the photo's border, the window grows to hold it (its box plus the margins, the left one
   ``MARGIN`` plus the object's largest disparity) and the solve runs again from the object
   found, up to ``MAX_WINDOWS`` windows;
-* the model has a third layer (``Params.front_margin``, :mod:`lss_kernels.model.front`):
-  what stands in front of the object leaves both fits and the data term, and a point's start
-  is carried across a thin occluder.
+* the window's solve is :func:`lss_kernels.solve` with the given parameters; the third layer
+  (``Params.front_margin``, :mod:`lss_kernels.model.front`: what stands in front of the
+  object leaves both fits and the data term) is off unless they turn it on.
 
 Outputs are the photo's size: outside the last window the disparity is ``inf`` (unknown, as in
 Middlebury's files), the masks are false and the layer map holds ``OUTSIDE``; ``phi`` and the
 consensus are the window's (``Result.window`` says where).  ``"auto"`` has no object to place
-a window around: it solves the whole photo, with the third layer.
+a window around: it solves the whole photo.
 """
 from __future__ import annotations
 
@@ -34,11 +34,9 @@ import numpy as np
 from .start_types import Box, Point
 from .params import Params
 
-__all__ = ["FRONT_MARGIN", "MARGIN", "MAX_WINDOWS", "OUTSIDE", "REACH", "TOUCH", "Window",
-           "photo_params", "solve_photo", "solve_in_windows"]
+__all__ = ["MARGIN", "MAX_WINDOWS", "OUTSIDE", "REACH", "TOUCH", "Window", "solve_photo",
+           "solve_in_windows"]
 
-#: The third layer's margin in front of Theta_1 for a photo, left-view pixels.
-FRONT_MARGIN = 4.0
 #: Half side of a point's first window, pixels.
 REACH = 128
 #: The window's margin around the object (the scored band is 20 px), pixels.
@@ -135,13 +133,6 @@ def _in_window(init, window: Window):
     return (cx - window.x0, cy - window.y0, rx, ry)
 
 
-def photo_params(params: Params | None = None) -> Params:
-    """``params`` (default: ``Params()``) with the third layer on (``front_margin``), unless
-    it sets one already."""
-    params = params if params is not None else Params()
-    return params if params.front_margin > 0 else params.replace(front_margin=FRONT_MARGIN)
-
-
 def _photo_result(result, window: Window, shape: tuple, windows: list):
     """The window's :class:`~lss_kernels.Result` at the photo's size (module text)."""
     layers = result.layers if result.layers is not None else result.foreground.astype(np.uint8)
@@ -202,19 +193,18 @@ def solve_photo(left, right, d_max, init, params=None, arch=None, callback=None)
 
     Arguments as for :func:`lss_kernels.solve` (``init`` in the left view: a
     :class:`~lss_kernels.Point`, a :class:`~lss_kernels.Box`, an ellipse ``(cx, cy, rx,
-    ry)``, a boolean mask or ``"auto"``); ``params`` get the third layer
-    (:func:`photo_params`).
+    ry)``, a boolean mask or ``"auto"``); ``Params(front_margin=4.0)`` adds the third layer.
 
     Returns
     -------
     Result
-        At the photo's size: ``layers`` (0 behind the object, 1 the object, 2 in front of it,
-        ``OUTSIDE`` beyond the window), ``window`` ``(x0, y0, x1, y1)``, and
+        At the photo's size: ``layers`` (0 behind the object, 1 the object, 2 in front of it
+        with the third layer, ``OUTSIDE`` beyond the window), ``window`` ``(x0, y0, x1, y1)``, and
         ``recovery["windows"]``: each window solved, the sides the object touched, seconds.
     """
     from .solver import solve
     from .validate import check_inputs
-    params = photo_params(params)
+    params = params if params is not None else Params()
     left, right, d_max, init = check_inputs(left, right, d_max, init, "left", params)
 
     def run(l, r, start):

@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from lss_kernels import Box, Params, Point, Result
-from lss_kernels.photo import (FRONT_MARGIN, MARGIN, MAX_WINDOWS, OUTSIDE, REACH, Window,
-                               photo_params, solve_in_windows)
+from lss_kernels.photo import MARGIN, MAX_WINDOWS, OUTSIDE, REACH, Window, solve_in_windows
+
+#: The third layer's margin in the tests, left-view pixels.
+FRONT_MARGIN = 4.0
 
 SHAPE = (300, 500)
 
@@ -94,9 +96,7 @@ def test_auto_solves_the_whole_photo():
     assert result.window == (0, 0, SHAPE[1], SHAPE[0])
 
 
-def test_photo_params_turn_the_third_layer_on_once():
-    assert photo_params().front_margin == FRONT_MARGIN
-    assert photo_params(Params(front_margin=6.0)).front_margin == 6.0
+def test_front_margin_is_checked():
     with pytest.raises(ValueError, match="front_margin"):
         Params(front_margin=-1.0)
 
@@ -119,7 +119,8 @@ def test_a_whole_photo_from_a_click(ti_arch):
     from lss_kernels.model.layers import FRONT, OBJECT
     from lss_kernels.photo import solve_photo
     scene = _rod_scene()
-    result = solve_photo(scene.left, scene.right, scene.d_max, Point(*scene.init_point))
+    result = solve_photo(scene.left, scene.right, scene.d_max, Point(*scene.init_point),
+                         params=Params(front_margin=FRONT_MARGIN))
     x0, y0, x1, y1 = result.window
     assert x0 > 60 and (y0, x1, y1) == (0, 400, 128)      # the box far to the left is left out
     assert result.disparity.shape == scene.fg_left.shape

@@ -68,8 +68,9 @@ def _add_solve(subparsers):
                    help="disparity.pfm keeps the two quadratics (the paper's model) instead "
                         "of refining each layer by its own matches")
     p.add_argument("--photo", action="store_true",
-                   help="a whole photo: solve the object under --init in a window around it, "
-                        "with a third layer for what stands in front of it (layers.png)")
+                   help="a whole photo: solve the object under --init in a window around it "
+                        "(outside it disparity.pfm is inf and layers.png 255); --param "
+                        "front_margin=4 adds a layer for what stands in front of the object")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=main_solve)
 

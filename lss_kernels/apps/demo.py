@@ -13,14 +13,13 @@ Outputs under ``out``: ``frames/frame_0000.png ...``, ``evolution.gif`` (loops f
 per recorded iteration ``every, 2 every, ...`` and the final state last), ``patch.png`` (Fig. 1(a)),
 the final ``disparity.png``, ``overlay.png`` and ``layers.png`` (the layer map over the left
 image: behind the object grey, the object red, in front of it blue; left view, the input's
-size).  ``--photo`` turns the third layer on (:mod:`lss_kernels.model.front`, as ``lss solve
---photo`` does; the demo solves the whole image, without a window).
+size; the layer in front of the object with ``Params.front_margin``, :mod:`lss_kernels.model.front`).
 
 Command line (registered by :func:`add_cli`)::
 
     lss demo [--scene DIR | LEFT RIGHT --dmax N] [--init auto|point:X,Y|box:X0,Y0,X1,Y1|ellipse:CX,CY,RX,RY|MASK.png]
              [--preset NAME] [--out DIR] [--every K] [--arch ARCH] [--patch X,Y,LEVEL]
-             [--iterations N] [--photo] [--quiet]
+             [--iterations N] [--quiet]
 """
 from __future__ import annotations
 
@@ -273,9 +272,6 @@ def add_cli(subparsers):
     p.add_argument("--patch", metavar="X,Y,LEVEL",
                    help="patch of the Fig. 1(a) plot (cyclopean pixels, level index)")
     p.add_argument("--iterations", type=int, metavar="N", help="iteration cap")
-    p.add_argument("--photo", action="store_true",
-                   help="the third layer on: what stands in front of the object is a layer of "
-                        "its own (layers.png shows it)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=main_demo)
     return p
@@ -336,11 +332,9 @@ def main_demo(args) -> int:
         print(f"lss demo: {left.shape[1]}x{left.shape[0]}, d_max {d_max:g}, arch {arch}, "
               f"output {args.out}", flush=True)
     try:
-        from ..photo import photo_params
         run_demo(left, right, d_max, init, args.out, every=args.every,
                  max_iterations=args.iterations, patch=patch, scene=scene,
-                 init_frame=init_frame, progress=not args.quiet,
-                 params=photo_params() if args.photo else None)
+                 init_frame=init_frame, progress=not args.quiet)
     except ValueError as exc:
         return _fail(str(exc).strip().splitlines()[0])
     return 0

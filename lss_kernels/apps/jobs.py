@@ -50,8 +50,8 @@ class Job:
     scene : lss_kernels.io.Scene or None
         The scene with its ground truth, to score the result (None: no score).
     photo : bool
-        A whole photo: the object solved in a window around the start, with a layer for
-        what stands in front of it (:mod:`lss_kernels.photo`; ``init`` in the left view).
+        A whole photo: the object solved in a window around the start
+        (:mod:`lss_kernels.photo`; ``init`` in the left view).
     """
 
     name: str
@@ -118,11 +118,10 @@ class SolverCache:
 
     def _solve_photo(self, job, params, callback):
         from dataclasses import replace
-        from ..photo import photo_params, solve_in_windows
+        from ..photo import solve_in_windows
         from ..validate import check_inputs
         if job.init_frame != "left":
             raise ValueError("init: a whole photo's start is given in the left view")
-        params = photo_params(params)
         left, right, d_max, init = check_inputs(job.left, job.right, job.d_max, job.init,
                                                 "left", params)
 
