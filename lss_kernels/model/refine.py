@@ -60,7 +60,10 @@ class LayerRefinement:
 
     After :meth:`run`, ``surface`` holds the refined map and ``weight`` 1 on the pixels
     whose last pass kept a distinct match of their own (the others took their layer's
-    average from their neighbours).  The planes have the shape of the image's size bucket
+    average from their neighbours); ``match`` their match (left-view disparity; the
+    surface elsewhere) and ``peak_ratio`` every pixel's best cost over its second best
+    (step 2's test; 1 where no second candidate has a cost), which
+    :mod:`lss_kernels.confidence` reads.  The planes have the shape of the image's size bucket
     and the kernels read ``H`` and ``W`` at run time from the pool's
     :class:`~lss_kernels.kernels.backend.Extent`: they compile once per bucket.
     """
@@ -84,6 +87,8 @@ class LayerRefinement:
         self.costs = field(ti.f32, shape + (self.K,))
         self.residual = field(ti.f32, shape)
         self.weight = field(ti.f32, shape)
+        self.match = field(ti.f32, shape)          # the last pass's best candidate
+        self.peak_ratio = field(ti.f32, shape)     # its cost over the second's (1: flat)
         # box sums of a 4-channel source, a value and its weight per layer (value fg,
         # value bg, weight fg, weight bg): its row prefix sums, the column prefix sums of
         # their row boxes, the box, and the residual's average (the sums of both boxes)
@@ -237,6 +242,9 @@ class LayerRefinement:
                     w = 1.0
             self.residual[y, x] = r
             self.weight[y, x] = w
+            self.match[y, x] = r + self.surface[y, x]
+            self.peak_ratio[y, x] = ti.select(second < NO_COST, best / ti.max(second, 1e-12),
+                                              1.0)
 
     @ti.kernel
     def _residual_source(self):
