@@ -1,12 +1,14 @@
 """lss_kernels: two-layer level-set stereo with exact occlusion geometry (Wang & Zickler).
 
-Public API: :func:`solve`, :class:`Solver`, :class:`Params`, :class:`Result`, and the
-initialisations :class:`Point` and :class:`Box` (or ``init="auto"``).
+Public API: :func:`solve`, :class:`Solver`, :class:`Params`, :class:`Result`, the
+initialisations :class:`Point` and :class:`Box` (or ``init="auto"``), and the cameras'
+:class:`Calibration` (:func:`read_calib`) for metric depth and point clouds.
 Importing the package does not initialise Taichi; :func:`lss_kernels.kernels.backend.init` does.
 """
 from .params import Params
 
-__all__ = ["Box", "Params", "Point", "Result", "Solver", "solve", "__version__"]
+__all__ = ["Box", "Calibration", "Params", "Point", "Result", "Solver", "read_calib", "solve",
+           "__version__"]
 __version__ = "0.1.0"
 
 
@@ -15,6 +17,9 @@ def __getattr__(name):
     if name in ("Result", "Solver", "solve"):
         from . import solver
         return getattr(solver, name)
+    if name in ("Calibration", "read_calib"):
+        from . import calib
+        return getattr(calib, name)
     if name in ("Point", "Box"):
         from .model import init
         return getattr(init, name)
