@@ -42,15 +42,17 @@ def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ra
 
 def refine_with_evidence(left, right, surface, foreground, occlusion, d_max, passes, ratio,
                          support=0.0, wide_weight=0.05):
-    """:func:`refine_layers` with the last pass's evidence: ``(S, match, peak_ratio)``, the
-    match the distinct pixels kept (the pass's surface elsewhere) and every pixel's best
-    cost over its second best, 1 where no second candidate has a cost."""
+    """:func:`refine_layers` with the refinement's evidence: ``(S, match, peak_ratio)``, the
+    match the distinct pixels of the last pass kept (the pass's surface elsewhere) and
+    every pixel's best cost over its second best (1 where no second candidate has a cost or
+    both costs are 0), the largest of the passes."""
     H, W = surface.shape
     S = np.asarray(surface, np.float64)
     S = np.clip(np.where(np.isfinite(S), S, 0.0), 0.0, d_max)
     layers = [np.asarray(foreground, bool), ~np.asarray(foreground, bool)]
     visible = ~np.asarray(occlusion, bool)
     censuses = census(left), census(right)
+    peak_ratio = np.zeros((H, W))
     costs_by_d = {d: left_cost(left, right, d, censuses) for d in range(int(d_max) + 1)}
     for R, window, smoothing in passes:
         base = np.round(S).astype(int)
@@ -80,7 +82,9 @@ def refine_with_evidence(left, right, surface, foreground, occlusion, d_max, pas
         residual = np.where(ok, base + kb - R + sub - S, 0.0)
         match = S + residual
         with np.errstate(invalid="ignore"):
-            peak_ratio = np.where(np.isfinite(second), best / np.maximum(second, 1e-12), 1.0)
+            peak_ratio = np.maximum(peak_ratio, np.where(
+                np.isfinite(second) & (second > 0), best / np.where(second > 0, second, 1.0),
+                1.0))
         weight = ok.astype(float)
         boxes = lambda a: (box_sum(a, 2 * smoothing + 1)
                            + wide_weight * box_sum(a, 8 * smoothing + 1))
