@@ -176,3 +176,17 @@ def test_the_result_gives_depth_and_points(ti_arch):
     assert result.confidence.shape == result.disparity.shape
     assert (result.confidence[result.occlusion] == 0).all()
     assert 0 <= result.confidence.min() and result.confidence.max() <= 1
+
+
+def test_solve_with_the_numbers_by_hand(tmp_path, ti_arch):
+    out = tmp_path / "out"
+    code = main(["solve", "--preset", "tiny", "--focal", "250", "--baseline", "0.12", "--cx",
+                 "30.5", "--doffs", "2", "--out", str(out), "--arch", ti_arch, "--quiet"])
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())["calibration"]
+    H = read_pfm(out / "depth.pfm").shape[0]
+    assert (summary["focal"], summary["baseline"], summary["cx"], summary["cy"],
+            summary["doffs"]) == (250.0, 0.12, 30.5, (H - 1) / 2.0, 2.0)
+    d, z = read_pfm(out / "disparity.pfm"), read_pfm(out / "depth.pfm")
+    np.testing.assert_allclose(z, (250.0 * 0.12 / (d.astype(np.float64) + 2.0))
+                               .astype(np.float32), rtol=1e-6)
