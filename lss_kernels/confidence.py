@@ -1,7 +1,7 @@
 """Per-pixel confidence of the left-view disparity, from what the solve already knows, and how
 a confidence is judged (the sparsification curve).
 
-A pixel's disparity can be wrong for four reasons the model can see:
+A pixel's disparity can be wrong for five reasons the model can see:
 
 - it is **occluded** (seen by the left camera only, Sec. 2): its depth is the background's
   surface continued under the foreground, with no match to check it against;
@@ -14,7 +14,12 @@ A pixel's disparity can be wrong for four reasons the model can see:
   (:mod:`lss_kernels.model.refine`, the best window cost over the second best away from
   it; 1 for a flat or periodic cost curve);
 - the refinement's **residual**: its own distinct match disagrees with the answer (the
-  layer's surface plus the smoothed residual of its neighbours).
+  layer's surface plus the smoothed residual of its neighbours);
+- the left image is **periodic** around it along the rows
+  (:func:`lss_kernels.recovery.periodicity`): a match there is one of several equally good,
+  whatever its peak ratio over a range shorter than the period says.  A periodic pair is
+  solved without the refinement first (:mod:`lss_kernels.recovery`), and then this is the
+  only evidence about its matches.
 
 The confidence is the product of one factor in ``[0, 1]`` per reason (:func:`confidence`).
 It ranks pixels; it is not a probability.
@@ -29,7 +34,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["BOUNDARY_REACH", "BOUNDARY_WIDTH", "RESIDUAL_SCALE", "STABILITY_WINDOW", "boundary_distance",
-           "confidence", "confidence_ratio", "local_stability", "sparsification"]
+           "confidence", "confidence_ratio", "local_stability", "periodic_map",
+           "sparsification"]
 
 #: Pixels (left view): the boundary's distance is measured up to this far; beyond it the
 #: boundary factor is 1 to float precision for the widths :func:`confidence` uses.
@@ -108,10 +114,25 @@ def local_stability(distinct, radius: int = STABILITY_WINDOW) -> np.ndarray:
     return _box_mean(_mask(distinct, "distinct").astype(float), radius)
 
 
-def confidence(disparity, foreground, occlusion, match, peak_ratio, distinct) -> np.ndarray:
+def periodic_map(image) -> np.ndarray:
+    """:func:`lss_kernels.recovery.periodicity` of ``image`` ``(H, W, 3)`` per pixel
+    ``(H, W)``: each pixel takes its tile's score (the pixels past the last tile, the
+    nearest tile's); 0 everywhere for an image smaller than a tile."""
+    from .recovery import TILE, periodicity
+    H, W = np.asarray(image).shape[:2]
+    score = periodicity(image)
+    if score.size == 0:
+        return np.zeros((H, W))
+    rows = np.minimum(np.arange(H) // TILE[0], score.shape[0] - 1)
+    cols = np.minimum(np.arange(W) // TILE[1], score.shape[1] - 1)
+    return score[rows][:, cols]
+
+
+def confidence(disparity, foreground, occlusion, match, peak_ratio, distinct,
+               periodic=None) -> np.ndarray:
     """Per-pixel confidence of a left-view disparity, in ``[0, 1]``.
 
-    ``C = C_occ * C_match * C_residual * C_boundary`` with
+    ``C = C_occ * C_match * C_residual * C_boundary * C_periodic`` with
 
     - ``C_occ``: 0 on occluded pixels, 1 elsewhere;
     - ``C_match = 1 - peak_ratio``: the distinctness of the pixel's best match;
@@ -119,7 +140,9 @@ def confidence(disparity, foreground, occlusion, match, peak_ratio, distinct) ->
       match, 1 on the others (no evidence against the answer);
     - ``C_boundary = 1 - exp(-(dist + 1) / width)``: ``dist`` the pixel's
       :func:`boundary_distance`, ``width = 1 + 4 (1 - s)`` pixels with ``s`` the
-      boundary's :func:`local_stability` around the pixel.
+      boundary's :func:`local_stability` around the pixel;
+    - ``C_periodic = 1 - periodic``: the image's periodicity around the pixel
+      (:func:`periodic_map`).
 
     Parameters
     ----------
@@ -133,6 +156,8 @@ def confidence(disparity, foreground, occlusion, match, peak_ratio, distinct) ->
         Its best cost over its second best, in ``(0, 1]``.
     distinct : ndarray, bool, shape (H, W)
         Pixels whose match passed the peak-ratio test.
+    periodic : ndarray, float, shape (H, W), optional
+        The left image's periodicity in [0, 1] (:func:`periodic_map`); None: 0.
 
     Returns
     -------
@@ -150,7 +175,10 @@ def confidence(disparity, foreground, occlusion, match, peak_ratio, distinct) ->
     width = BOUNDARY_WIDTH[0] + BOUNDARY_WIDTH[1] * (1.0 - local_stability(distinct))
     c_boundary = 1.0 - np.exp(-(boundary_distance(_mask(foreground, "foreground", shape)) + 1.0)
                               / width)
-    return np.where(occlusion, 0.0, c_match * c_residual * c_boundary).astype(np.float32)
+    c_periodic = 1.0 if periodic is None else 1.0 - np.clip(
+        _mask(periodic, "periodic", shape), 0.0, 1.0)
+    return np.where(occlusion, 0.0, c_match * c_residual * c_boundary * c_periodic
+                    ).astype(np.float32)
 
 
 def sparsification(confidence, bad, fractions=None):

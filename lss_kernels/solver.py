@@ -36,7 +36,7 @@ from .model.offset import SHIFT, model_pair, search_range, to_user_left
 from .model.occlusion import OcclusionGeometry
 from .model.refine import LayerRefinement
 from .params import Params, c_max
-from .confidence import confidence
+from .confidence import confidence, periodic_map
 from .photometry import equalise
 from .result import Result
 from .model.shapes import GlobalShapes
@@ -450,7 +450,8 @@ class Solver:
         surface, occlusion, foreground, disparity = self.left_view(refine=True)
         match, peak_ratio, distinct = self.evidence()
         sure = confidence(disparity, foreground, occlusion,
-                          disparity if match is None else match, peak_ratio, distinct)
+                          disparity if match is None else match, peak_ratio, distinct,
+                          periodic_map(self.left_image))
         mean, sigma = self.consensus()
         th = self.shapes.pixel_coefficients(2.0)
         th[:, 5] -= self.offset

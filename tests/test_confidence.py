@@ -84,3 +84,22 @@ def test_sparsification_counts_by_hand():
     assert (worst, best) == (0.0, 60.0) and ratio == 0.0
     with pytest.raises(ValueError, match=r"^fractions: expected values in \(0, 1\]"):
         sparsification(conf, bad, [0.0])
+
+
+def test_a_periodic_image_lowers_the_confidence():
+    from lss_kernels.confidence import periodic_map
+    from lss_kernels.recovery import TILE
+    H, W = 2 * TILE[0] + 5, 2 * TILE[1] + 40
+    x = np.arange(W)
+    rng = np.random.default_rng(0)
+    image = np.repeat(rng.random((H, W))[..., None], 3, axis=2)
+    image[:, :W // 2] = (0.5 + 0.4 * np.sin(2 * np.pi * x[:W // 2] / 6.0))[None, :, None]
+    periodic = periodic_map(image)
+    assert periodic.shape == (H, W)
+    assert periodic[:, :TILE[1]].min() > 0.6 and periodic[:, -1].max() < 0.3
+    fg, d = _flat_two_layers(H, W)
+    ones, none = np.ones((H, W), bool), np.zeros((H, W), bool)
+    plain = confidence(d, fg, none, d, np.full((H, W), 0.2), ones)
+    c = confidence(d, fg, none, d, np.full((H, W), 0.2), ones, periodic)
+    np.testing.assert_allclose(c, plain * (1 - periodic), rtol=1e-5, atol=1e-7)
+    assert c[5, 5] < 0.4 * c[5, W - 5]
