@@ -3,7 +3,8 @@
 Reads an ``lss eval --methods lss,sgm`` output folder (each run's ``disparity.pfm`` and
 ``occlusion.png``) and the scene folder it scored.  Each method's cloud holds its
 non-occluded pixels around the object (the true foreground's bounding box widened by
-``--margin`` pixels: the object and the wall beside it), coloured by the left image; the
+``--margin`` pixels: the object and the wall beside it), coloured by the left image, in
+the limits of the true cloud (points beyond them are not drawn); the
 points whose disparity lies more than 1 px off both true surfaces
 (:mod:`lss_kernels.flying`) are drawn in red.  Seen from above and to the side, a flying
 point hangs between the object and the wall.
@@ -49,6 +50,9 @@ def main(argv=None):
     band = evaluation_masks(scene)["band"]
     calib = Calibration(focal=float(W), baseline=1.0)
     runs = Path(args.eval_dir) / "runs" / scene.name
+    truth, _ = calib.points(np.where(np.isfinite(scene.disp_left), scene.disp_left, 0.0), box)
+    low, high = np.percentile(truth, 0.5, axis=0), np.percentile(truth, 99.5, axis=0)
+    pad = 0.05 * (high - low)
     fig = plt.figure(figsize=(10, 4.6), dpi=110)
     for i, method in enumerate(("lss", "sgm")):
         disparity = io.read_pfm(runs / method / "disparity.pfm")
@@ -60,12 +64,16 @@ def main(argv=None):
         flying = flying_pixels(disparity, kept & band & np.isfinite(scene.disp_left),
                                scene.disp_left, scene.fg_left)[kept]
         share = 100.0 * flying.sum() / max(int((kept & band).sum()), 1)
-        xyz, rgb = points["xyz"], points["rgb"] / 255.0
+        inside = ((points["xyz"] >= low - pad) & (points["xyz"] <= high + pad)).all(axis=1)
+        xyz, rgb, flying = points["xyz"][inside], points["rgb"][inside] / 255.0, flying[inside]
         ax = fig.add_subplot(1, 2, i + 1, projection="3d")
         ax.scatter(xyz[~flying, 0], xyz[~flying, 2], -xyz[~flying, 1], c=rgb[~flying], s=0.3,
                    depthshade=False, linewidths=0)
         ax.scatter(xyz[flying, 0], xyz[flying, 2], -xyz[flying, 1], c="red", s=1.2,
                    depthshade=False, linewidths=0)
+        ax.set_xlim(low[0] - pad[0], high[0] + pad[0])
+        ax.set_ylim(low[2] - pad[2], high[2] + pad[2])
+        ax.set_zlim(-high[1] - pad[1], -low[1] + pad[1])
         ax.view_init(elev=args.view[0], azim=args.view[1])
         ax.set_title(f"{LABELS[method]}\nflying: {share:.1f} % of the band's points (red)",
                      fontsize=9)
