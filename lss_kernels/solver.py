@@ -434,9 +434,11 @@ class Solver:
                     valid=bool(lev.valid[y, x]), mean_D=2.0 * d_mean - self.offset)
 
     def evidence(self):
-        """Left-view ``(match, peak_ratio, distinct)`` of the refinement's last pass (after
-        :meth:`left_view` with ``refine``; :mod:`lss_kernels.model.refine`); without the
-        refinement, no evidence: the match is None, the ratio 0 and no pixel distinct."""
+        """Left-view ``(match, peak_ratio, distinct)`` of the refinement (after
+        :meth:`left_view` with ``refine``; :mod:`lss_kernels.model.refine`): the last pass's
+        match, the peak ratio (the largest of the passes) and whether the last pass kept a
+        distinct match; without the refinement, no evidence: the match is None, the ratio 0
+        and no pixel distinct."""
         if self.refinement is None:
             shape = (self.H, self.W)
             return None, np.zeros(shape, np.float32), np.zeros(shape, bool)
