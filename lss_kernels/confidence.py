@@ -35,7 +35,7 @@ import numpy as np
 
 __all__ = ["BOUNDARY_REACH", "BOUNDARY_WIDTH", "RESIDUAL_SCALE", "STABILITY_WINDOW",
            "boundary_distance", "confidence", "confidence_ratio", "local_stability",
-           "periodic_map", "sparsification"]
+           "of_solver", "periodic_map", "sparsification"]
 
 #: Pixels (left view): the boundary's distance is measured up to this far; beyond it the
 #: boundary factor is within 0.2 % of 1 for the widths :func:`confidence` uses (at most 5).
@@ -179,6 +179,26 @@ def confidence(disparity, foreground, occlusion, match, peak_ratio, distinct,
         _mask(periodic, "periodic", shape), 0.0, 1.0)
     return np.where(occlusion, 0.0, c_match * c_residual * c_boundary * c_periodic
                     ).astype(np.float32)
+
+
+def of_solver(solver, disparity, foreground, occlusion) -> np.ndarray:
+    """:func:`confidence` of a :class:`~lss_kernels.Solver`'s left-view output (after its
+    ``left_view(refine=True)``), from its refinement's planes
+    (:class:`~lss_kernels.model.refine.LayerRefinement`: the last pass's match, the peak
+    ratio, the largest of the passes, and the last pass's distinct matches) and its left
+    image.  Without the refinement (``Params(refine=False)``) there is no match evidence:
+    the match is the disparity, the ratio 0 and no pixel distinct."""
+    from .model.offset import to_user_left
+    disparity_shape = np.shape(disparity)
+    refinement = solver.refinement
+    if refinement is None:
+        evidence = (disparity, np.zeros(disparity_shape), np.zeros(disparity_shape, bool))
+    else:
+        user = lambda plane: to_user_left(solver.extent.image(plane), solver.shift)
+        evidence = (np.clip(user(refinement.match) - solver.offset, 0.0, solver.d_max),
+                    user(refinement.peak_ratio), user(refinement.weight) > 0.5)
+    return confidence(disparity, foreground, occlusion, *evidence,
+                      periodic_map(solver.left_image))
 
 
 def sparsification(confidence, bad, fractions=None):

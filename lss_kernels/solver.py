@@ -36,7 +36,7 @@ from .model.offset import SHIFT, model_pair, search_range, to_user_left
 from .model.occlusion import OcclusionGeometry
 from .model.refine import LayerRefinement
 from .params import Params, c_max
-from .confidence import confidence, periodic_map
+from .confidence import of_solver
 from .photometry import equalise
 from .result import Result
 from .model.shapes import GlobalShapes
@@ -433,27 +433,9 @@ class Solver:
                     d_p=2.0 * lev.d_p[y, x] - self.offset, sigma_p=2.0 * lev.sigma_p[y, x],
                     valid=bool(lev.valid[y, x]), mean_D=2.0 * d_mean - self.offset)
 
-    def evidence(self):
-        """Left-view ``(match, peak_ratio, distinct)`` of the refinement (after
-        :meth:`left_view` with ``refine``; :mod:`lss_kernels.model.refine`): the last pass's
-        match, the peak ratio (the largest of the passes) and whether the last pass kept a
-        distinct match; without the refinement, no evidence: the match is None, the ratio 0
-        and no pixel distinct."""
-        if self.refinement is None:
-            shape = (self.H, self.W)
-            return None, np.zeros(shape, np.float32), np.zeros(shape, bool)
-        user = lambda plane: to_user_left(self.extent.image(plane), self.shift)
-        match = np.clip(user(self.refinement.match) - self.offset, 0.0, self.d_max)
-        return (match.astype(np.float32), user(self.refinement.peak_ratio),
-                user(self.refinement.weight) > 0.5)
-
     def result(self):
         """The current model as a :class:`Result`."""
         surface, occlusion, foreground, disparity = self.left_view(refine=True)
-        match, peak_ratio, distinct = self.evidence()
-        sure = confidence(disparity, foreground, occlusion,
-                          disparity if match is None else match, peak_ratio, distinct,
-                          periodic_map(self.left_image))
         mean, sigma = self.consensus()
         th = self.shapes.pixel_coefficients(2.0)
         th[:, 5] -= self.offset
@@ -461,13 +443,12 @@ class Solver:
         timings["iterations_total"] = self._t_loop
         timings["total"] = (self.timings["setup_total"] + self._t_loop
                             + self.timings.get("refine", 0.0))
-        return Result(disparity=disparity, surface=surface, occlusion=occlusion,
-                      foreground=foreground, confidence=sure,
-                      phi=self.extent.image(self.levelset.phi), theta_fg=th[0], theta_bg=th[1],
-                      consensus_mean=mean, consensus_sigma=sigma, iterations=self.iteration,
-                      stop_reason=self.stop_reason or "not finished", timings=timings,
-                      history=list(self.history), photometry=dict(self.photometry),
-                      search=dict(self.search))
+        return Result(disparity=disparity, surface=surface, occlusion=occlusion, timings=timings,
+                      foreground=foreground, search=dict(self.search), iterations=self.iteration,
+                      confidence=of_solver(self, disparity, foreground, occlusion),
+                      phi=self.extent.image(self.levelset.phi), photometry=dict(self.photometry),
+                      consensus_mean=mean, consensus_sigma=sigma, theta_fg=th[0], theta_bg=th[1],
+                      stop_reason=self.stop_reason or "not finished", history=list(self.history))
 
     def _all_grids(self):
         """Every grid the solver holds (``_GRID`` names to objects), the current one first."""
