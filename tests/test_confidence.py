@@ -103,3 +103,19 @@ def test_a_periodic_image_lowers_the_confidence():
     c = confidence(d, fg, none, d, np.full((H, W), 0.2), ones, periodic)
     np.testing.assert_allclose(c, plain * (1 - periodic), rtol=1e-5, atol=1e-7)
     assert c[5, 5] < 0.4 * c[5, W - 5]
+
+
+def test_a_solve_without_the_refinement_has_no_match_evidence(ti_arch):
+    """Params(refine=False) (a periodic pair's first solve): the confidence is the boundary
+    factor amid no distinct matches times the periodic one, 0 on occluded pixels."""
+    from lss_kernels import Params, solve
+    from lss_kernels.confidence import periodic_map
+    from lss_kernels.scenes import make_scene
+    scene = make_scene("tiny")
+    result = solve(scene.left, scene.right, scene.d_max, tuple(scene.init_ellipse),
+                   params=Params(refine=False))
+    none = np.zeros(result.foreground.shape, bool)
+    want = confidence(result.disparity, result.foreground, result.occlusion, result.disparity,
+                      np.zeros(none.shape), none, periodic_map(scene.left))
+    np.testing.assert_array_equal(result.confidence, want)
+    assert (result.confidence[result.occlusion] == 0).all() and result.confidence.max() > 0.5
