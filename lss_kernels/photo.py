@@ -19,7 +19,7 @@ is one of many, so:
   object leaves both fits and the data term) is off unless they turn it on.
 
 Outputs are the photo's size: outside the last window the disparity is ``inf`` (unknown, as in
-Middlebury's files), the masks are false and the layer map holds ``OUTSIDE``; ``phi`` and the
+Middlebury's files), the masks are false, the confidence 0 and the layer map holds ``OUTSIDE``; ``phi`` and the
 consensus are the window's (``Result.window`` says where).  ``"auto"`` has no object to place
 a window around: it solves the whole photo.
 """
@@ -145,6 +145,8 @@ def _photo_result(result, window: Window, shape: tuple, windows: list):
         occlusion=window.paste(result.occlusion, shape, False),
         foreground=window.paste(result.foreground, shape, False),
         layers=window.paste(layers.astype(np.uint8), shape, np.uint8(OUTSIDE)),
+        confidence=(None if result.confidence is None else
+                    window.paste(result.confidence, shape, np.float32(0.0))),
         window=window.as_tuple(), timings=timings,
         recovery={**result.recovery, "windows": windows})
 

@@ -15,7 +15,9 @@ class Result:
     own matches (surface plus parallax, :mod:`lss_kernels.model.refine`; the surface itself
     with ``Params(refine=False)``); ``surface``: the two quadratics' disparity (the paper's
     model); ``occlusion`` (seen by the left camera, hidden from the right) and
-    ``foreground`` boolean ``(H, W)``.
+    ``foreground`` boolean ``(H, W)``; ``confidence`` float32 ``(H, W)`` in [0, 1], how sure
+    each pixel's disparity is (:mod:`lss_kernels.confidence`; 0 on occluded pixels).
+    :meth:`depth` and :meth:`points` give metric depth and 3-D points for a calibration.
 
     Cyclopean frame (the model's): ``phi`` ``(H, W)`` (> 0 foreground), ``consensus_mean`` and
     ``consensus_sigma`` ``(H, W)`` in left-view disparity units (sigma = d_max where no valid
@@ -36,6 +38,7 @@ class Result:
     surface: np.ndarray
     occlusion: np.ndarray
     foreground: np.ndarray
+    confidence: np.ndarray
     phi: np.ndarray
     theta_fg: np.ndarray
     theta_bg: np.ndarray
@@ -50,3 +53,16 @@ class Result:
     search: dict = field(default_factory=dict)
     layers: np.ndarray | None = None
     window: tuple | None = None
+
+    def depth(self, calib):
+        """Left-view depth ``focal * baseline / (disparity + doffs)`` (float32 ``(H, W)``, the
+        baseline's unit; inf where unknown) for a :class:`~lss_kernels.calib.Calibration`."""
+        return calib.depth(self.disparity)
+
+    def points(self, calib, which="object"):
+        """3-D points (float32 ``(N, 3)``, left camera frame: x right, y down, z forward)
+        of ``which`` pixels (:func:`lss_kernels.cloud.select`: ``"object"``, ``"all"`` seen
+        by both cameras, ``"background"``), in row-major pixel order; pixels at infinite
+        depth give none."""
+        from .cloud import select
+        return calib.points(self.disparity, select(which, self.foreground, self.occlusion))[0]

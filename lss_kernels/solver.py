@@ -39,6 +39,7 @@ from .model.offset import SHIFT, model_pair, search_range, to_user_left
 from .model.occlusion import OcclusionGeometry
 from .model.refine import LayerRefinement
 from .params import Params, c_max
+from .confidence import of_solver
 from .photometry import equalise
 from .result import Result
 from .model.shapes import GlobalShapes
@@ -485,7 +486,8 @@ class Solver:
                       consensus_mean=mean, consensus_sigma=sigma, iterations=self.iteration,
                       stop_reason=self.stop_reason or "not finished", timings=timings,
                       history=list(self.history), photometry=dict(self.photometry),
-                      search=dict(self.search), layers=layers)
+                      search=dict(self.search), layers=layers,
+                      confidence=of_solver(self, disparity, foreground, occlusion))
 
     def _all_grids(self):
         """Every grid the solver holds (``_GRID`` names to objects), the current one first."""

@@ -520,3 +520,54 @@ def test_cli_pair_too_large_for_the_memory(capsys, tmp_path, pair_files, ti_arch
                                       "ellipse:32,24,10,8"], ti_arch)
     assert re.match(r"^left: a 64x48 pair searched to d_max 12 needs about .* GiB available; "
                     r"expected a smaller pair", message)
+
+
+# ------------------------------------------------------------------------------ calibration
+def _calib(focal0=100.0, focal1=100.0, cy1=24.0, doffs=4.0, baseline=0.1, size=(64, 48),
+           drop=(), extra=""):
+    lines = {"cam0": f"[{focal0} 0 30; 0 {focal0} 24; 0 0 1]",
+             "cam1": f"[{focal1} 0 34; 0 {focal1} {cy1}; 0 0 1]",
+             "doffs": doffs, "baseline": baseline, "width": size[0], "height": size[1]}
+    return "".join(f"{k}={v}\n" for k, v in lines.items() if k not in drop) + extra
+
+
+@pytest.mark.parametrize("case, message", [
+    ("file_missing", r"^calib: file not found: .*nope\.txt$"),
+    ("focal_differs", r"^calib .*calib\.txt: expected cam0 and cam1 of one focal length \(a "
+                      r"rectified pair\), got 100 and 120$"),
+    ("row_differs", r"^calib .*: expected cam0 and cam1 of one principal row cy \(a rectified "
+                    r"pair\), got 24 and 30$"),
+    ("size", r"^--calib: expected a calibration of the 64x48 images, got one of 128x96 "
+             r"\(rescale"),
+    ("missing_key", r"^calib .*: missing baseline; expected cam0, cam1, doffs, baseline$"),
+    ("doffs", r"^calib .*: doffs: expected cx1 - cx0 = 4, got 9$"),
+    ("baseline_zero", r"^calib .*: baseline: expected a number > 0, got 0$"),
+    ("not_a_number", r"^calib .*: baseline: expected a number, got 'ten'$"),
+    ("unknown_key", r"^calib .*: unknown key 'focal'; expected cam0, cam1, doffs"),
+    ("not_key_value", r"^calib .*: line 7: expected key=value, got 'hello'$"),
+    ("matrix", r"^calib .*: cam0: expected a 3x3 matrix \[f 0 cx; 0 f cy; 0 0 1\], got "),
+    ("focal_negative", r"^--focal: expected a finite number > 0, got -5\.0$"),
+    ("baseline_nan", r"^--baseline: expected a finite number > 0, got nan$"),
+    ("baseline_missing", r"^--baseline: required with --focal$"),
+    ("focal_missing", r"^--focal: required with --baseline, --cx$"),
+    ("both", r"^--calib: expected a calibration file or --focal and --baseline, got both "
+             r"\(--focal\)$"),
+])
+def test_cli_bad_calibration(case, message, capsys, tmp_path, pair_files, ti_arch):
+    left, right = pair_files
+    file = tmp_path / "calib.txt"
+    text = {"focal_differs": _calib(focal1=120.0), "row_differs": _calib(cy1=30.0),
+            "size": _calib(size=(128, 96)), "missing_key": _calib(drop=("baseline",)),
+            "doffs": _calib(doffs=9.0), "baseline_zero": _calib(baseline=0),
+            "not_a_number": _calib(baseline="ten"), "unknown_key": _calib(extra="focal=3\n"),
+            "not_key_value": _calib(extra="hello\n"),
+            "matrix": _calib().replace("[100.0 0 30; 0 100.0 24; 0 0 1]", "[100 0 30]")}
+    file.write_text(text.get(case, _calib()))
+    calib = {"file_missing": ["--calib", str(tmp_path / "nope.txt")],
+             "focal_negative": ["--focal", "-5", "--baseline", "1"],
+             "baseline_nan": ["--focal", "5", "--baseline", "nan"],
+             "baseline_missing": ["--focal", "5"],
+             "focal_missing": ["--baseline", "5", "--cx", "3"],
+             "both": ["--calib", str(file), "--focal", "5"]}.get(case, ["--calib", str(file)])
+    args = [left, right, "--dmax", "12", "--init", "ellipse:32,24,10,8", *calib]
+    assert re.search(message, _cli(capsys, tmp_path, args, ti_arch))

@@ -170,3 +170,15 @@ def test_without_opencv_one_line_error(monkeypatch, planes, method):
     assert "\n" not in str(info.value)
     assert info.value.__suppress_context__
     assert baselines.METHODS  # importing the module never needed OpenCV
+
+
+def test_sgm_lr_difference_is_what_the_check_thresholds():
+    """SGBM's confidence (its left-right difference) comes from the views sgm checks: a pixel
+    is occluded exactly where the difference exceeds the tolerance (inf: rejected)."""
+    from lss_kernels.apps.baselines import sgm_lr_difference
+    scene = make_scene("easy")
+    _, occlusion = sgm(scene.left, scene.right, scene.d_max)
+    difference = sgm_lr_difference(scene.left, scene.right, scene.d_max)
+    assert difference.shape == occlusion.shape and (difference >= 0).all()
+    np.testing.assert_array_equal(occlusion, ~(difference <= 1.0))
+    assert np.isinf(difference).any() and np.isfinite(difference).mean() > 0.8

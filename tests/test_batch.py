@@ -27,7 +27,7 @@ FAST = Params(max_iterations=ITERATIONS)
 #: kernels of the tiny scenes that earlier tests compiled
 THREADS = os.cpu_count()
 FILES = {"disparity.pfm", "surface.pfm", "occlusion.png", "foreground.png", "disparity.png", "overlay.png",
-         "summary.json"}
+         "confidence.pfm", "confidence.png", "summary.json"}
 MAPS = ("disparity.pfm", "occlusion.png", "foreground.png")
 
 

@@ -56,7 +56,9 @@ def test_rows_and_run_folders(evaluated):
         assert 0.0 <= r["occ_f1"] <= 1.0 and 0.0 <= r["bad4"] <= 100.0 and r["seconds"] > 0
         run = out / "runs" / r["scene"] / r["method"]
         assert {p.name for p in run.iterdir()} == {"disparity.pfm", "occlusion.png",
-                                                  "result.json"}
+                                                  "result.json"} | (
+            {"confidence.pfm"} if r["method"] == "lss" else set())
+        assert 0.0 <= r["flying"] <= 100.0 and r["n_flying"] <= r["n_points"]
         assert json.loads((run / "result.json").read_text())["occ_f1"] == r["occ_f1"]
     lss = [r for r in rows if r["method"] == "lss"]
     assert all(1 <= r["iterations"] <= FAST.max_iterations for r in lss)
@@ -92,6 +94,10 @@ def test_table_md(evaluated):
     assert any(line.startswith("| **mean bad-4.0 (%)**") and line.endswith("| 17.57 | 16.07 |")
                for line in lines)
     assert any(line.startswith("| **seconds per scene**") for line in lines)
+    flying = {m: sum(r["flying"] for r in rows if r["method"] == m) / len(SCENES)
+              for m in METHOD_NAMES}
+    assert any(line.startswith("| **mean flying pixels (% of the band's points)** | ")
+               and f"| {flying['sgm']:.2f} |" in line for line in lines)
     # a detail table per method: F1, precision, recall, bad-4.0, seconds, iterations
     start = lines.index("## lss, per scene")
     row_a = next(line for line in lines[start:] if line.startswith("| sceneA |"))

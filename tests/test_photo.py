@@ -19,7 +19,7 @@ def _result(foreground, disparity=10.0):
     d[foreground] = disparity
     zeros = np.zeros((h, w), np.float32)
     return Result(disparity=d, surface=d.copy(), occlusion=np.zeros((h, w), bool),
-                  foreground=foreground, phi=zeros, theta_fg=np.zeros(6), theta_bg=np.zeros(6),
+                  foreground=foreground, confidence=np.ones((h, w), np.float32), phi=zeros, theta_fg=np.zeros(6), theta_bg=np.zeros(6),
                   consensus_mean=zeros, consensus_sigma=zeros, iterations=1, stop_reason="test",
                   layers=foreground.astype(np.uint8))
 
@@ -71,6 +71,7 @@ def test_the_window_follows_the_object_until_it_holds_it():
     assert result.disparity.shape == shape and np.isinf(result.disparity[0, -1])
     assert np.array_equal(result.foreground, truth)
     assert (result.layers != OUTSIDE).sum() == second.shape[0] * second.shape[1]
+    assert (result.confidence[result.layers == OUTSIDE] == 0).all()
 
 
 def test_the_window_stops_growing_after_max_windows():

@@ -59,7 +59,8 @@ def render(d_fg, d_bg, fg, seed=0):
     return quantise(left), quantise(right), occ
 
 
-def run_kernels(left, right, surface, fg, occ, d_max, passes, ratio=0.9, support=0.0):
+def run_kernels(left, right, surface, fg, occ, d_max, passes, ratio=0.9, support=0.0,
+                evidence=False):
     H, W = surface.shape
     pool = FieldPool()
     L, R = pool.vector(3, ti.f32, (H, W)), pool.vector(3, ti.f32, (H, W))
@@ -74,6 +75,9 @@ def run_kernels(left, right, surface, fg, occ, d_max, passes, ratio=0.9, support
     O.from_numpy(occ.astype(np.int32))
     refinement.run(L, R, S, F, O, d_max)
     out = refinement.extent.image(refinement.surface)
+    if evidence:
+        out = (out, refinement.extent.image(refinement.match),
+               refinement.extent.image(refinement.peak_ratio))
     pool.destroy()
     return out
 
@@ -97,6 +101,27 @@ def test_kernels_match_the_numpy_specification(ti_arch):
     close = np.abs(got - want) < 0.01
     assert close.mean() > 0.995, np.abs(got - want).max()
     assert np.abs(got - want).mean() < 1e-3
+
+
+def test_the_last_pass_evidence_matches_the_numpy_specification(ti_arch):
+    """The match and peak ratio that :mod:`lss_kernels.confidence` reads."""
+    d_fg, d_bg, fg = two_layers()
+    left, right, occ = render(d_fg, d_bg, fg, seed=2)
+    surface = np.where(fg, 29.0, 9.5)
+    passes = ((5, 3, 2), (2, 2, 1))
+    _, match, ratio = run_kernels(left, right, surface, fg, occ, 40.0, passes, support=0.2,
+                                  evidence=True)
+    _, want_match, want_ratio = after.refine_with_evidence(left, right, surface, fg, occ, 40.0,
+                                                           passes, 0.9, 0.2)
+    assert (np.abs(match - want_match) < 0.01).mean() > 0.995
+    assert (np.abs(ratio - want_ratio) < 1e-3).mean() > 0.995
+    assert ((ratio > 0) & (ratio <= 1)).all()
+    # the textured pair's distinct matches are its true disparities, within the half pixel
+    # of a parabola's vertex on a census cost
+    distinct = (ratio < 0.9) & ~occ
+    assert distinct.mean() > 0.5
+    truth = np.where(fg, d_fg, d_bg)
+    assert np.median(np.abs(match - truth)[distinct]) < 0.5
 
 
 def test_a_surface_outside_the_searched_range_is_clamped_first(ti_arch):

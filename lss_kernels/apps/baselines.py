@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["METHODS", "OPENCV_MISSING", "bm_lr", "lr_check", "require_opencv", "sgm"]
+__all__ = ["METHODS", "OPENCV_MISSING", "bm_lr", "lr_check", "require_opencv", "sgm",
+           "sgm_lr_difference"]
 
 OPENCV_MISSING = 'baselines need OpenCV: pip install "lss-kernels[baselines]"'
 
@@ -179,14 +180,34 @@ def sgm(left: np.ndarray, right: np.ndarray, d_max: float, block_size: int = 5):
     H. Hirschmüller, "Stereo processing by semiglobal matching and mutual information",
     TPAMI 2008.
     """
-    cv2 = require_opencv()
     num = _num_disparities(d_max)
+    return _run(_sgbm(num, block_size), _to_uint8(left), _to_uint8(right), num)
+
+
+def _sgbm(num: int, block_size: int):
+    """OpenCV's StereoSGBM as :func:`sgm` sets it up."""
+    cv2 = require_opencv()
     area = 3 * block_size * block_size
-    matcher = cv2.StereoSGBM.create(
+    return cv2.StereoSGBM.create(
         minDisparity=0, numDisparities=num, blockSize=block_size, P1=8 * area, P2=32 * area,
         disp12MaxDiff=-1, preFilterCap=63, uniquenessRatio=10, speckleWindowSize=0,
         speckleRange=0, mode=cv2.StereoSGBM_MODE_HH)
-    return _run(matcher, _to_uint8(left), _to_uint8(right), num)
+
+
+def sgm_lr_difference(left: np.ndarray, right: np.ndarray, d_max: float,
+                      block_size: int = 5) -> np.ndarray:
+    """SGBM's left-right difference ``|d_L(x) - d_R(x - d_L(x))|`` per left pixel (the
+    views of :func:`sgm`), the usual confidence of a classical matcher (smaller: surer);
+    inf where ``d_L`` or ``d_R`` is rejected or the match leaves the right image."""
+    num = _num_disparities(d_max)
+    d_left, d_right = _both_views(_sgbm(num, block_size), _to_uint8(left), _to_uint8(right),
+                                  num)
+    height, width = d_left.shape
+    valid = d_left >= 0
+    x_match = np.rint(np.arange(width)[None, :] - np.where(valid, d_left, 0)).astype(np.int64)
+    inside = valid & (x_match >= 0) & (x_match < width)
+    d_back = d_right[np.arange(height)[:, None], np.clip(x_match, 0, width - 1)]
+    return np.where(inside & (d_back >= 0), np.abs(d_left - d_back), np.inf).astype(np.float32)
 
 
 def bm_lr(left: np.ndarray, right: np.ndarray, d_max: float, block_size: int = 11):

@@ -39,8 +39,9 @@ def _add_solve(subparsers):
     p = subparsers.add_parser(
         "solve", help="solve one pair or scene folder",
         description="Two-layer level-set stereo on a rectified pair (left image = reference). "
-                    "Writes disparity.pfm, occlusion.png, foreground.png, disparity.png, "
-                    "overlay.png and summary.json into --out.")
+                    "Writes disparity.pfm, confidence.pfm, occlusion.png, foreground.png, "
+                    "disparity.png, confidence.png, overlay.png and summary.json into --out; "
+                    "with a calibration also depth.pfm, cloud.ply and object.ply.")
     p.add_argument("images", nargs="*", metavar="LEFT RIGHT", help="left and right images")
     p.add_argument("--scene", metavar="DIR", help="scene folder (reads d_max and, when given, "
                    "init_ellipse or else init_point from meta.json)")
@@ -71,8 +72,48 @@ def _add_solve(subparsers):
                    help="a whole photo: solve the object under --init in a window around it "
                         "(outside it disparity.pfm is inf and layers.png 255); --param "
                         "front_margin=4 adds a layer for what stands in front of the object")
+    p.add_argument("--calib", metavar="FILE", help="the cameras' calibration, Middlebury's "
+                   "calib.txt (cam0, cam1, doffs, baseline, width, height): also writes "
+                   "depth.pfm, cloud.ply and object.ply, in the baseline's unit")
+    p.add_argument("--focal", type=float, metavar="F", help="instead of --calib: the focal "
+                   "length, pixels (with --baseline)")
+    p.add_argument("--baseline", type=float, metavar="B", help="instead of --calib: the "
+                   "baseline, in the unit wanted for depth (with --focal)")
+    p.add_argument("--cx", type=float, metavar="X", help="the left principal point's x, "
+                   "pixels (default: the image's centre)")
+    p.add_argument("--cy", type=float, metavar="Y", help="its y (default: the image's centre)")
+    p.add_argument("--doffs", type=float, default=0.0, metavar="D",
+                   help="cx1 - cx0, pixels (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=main_solve)
+
+
+def _calibration(args, left):
+    """The :class:`~lss_kernels.calib.Calibration` of ``--calib`` or ``--focal`` and
+    ``--baseline`` (None without them), checked against the size of ``left``."""
+    from ..calib import Calibration, read_calib
+    from ..io import read_image
+    by_hand = [f"--{k}" for k in ("focal", "baseline", "cx", "cy")
+               if getattr(args, k) is not None] + (["--doffs"] if args.doffs else [])
+    if args.calib is not None and by_hand:
+        raise CliError(f"--calib: expected a calibration file or --focal and --baseline, "
+                       f"got both ({', '.join(by_hand)})")
+    if args.calib is None and not by_hand:
+        return None
+    if args.calib is None:
+        for need in ("focal", "baseline"):
+            if getattr(args, need) is None:
+                raise CliError(f"--{need}: required with {', '.join(by_hand)}")
+        try:
+            calib = Calibration(focal=args.focal, baseline=args.baseline, cx=args.cx,
+                                cy=args.cy, doffs=args.doffs)
+        except ValueError as exc:
+            raise CliError(f"--{exc}") from None
+    else:
+        calib = read_calib(args.calib)
+    shape = (left if not isinstance(left, (str, os.PathLike)) else read_image(left, "left")).shape
+    calib.check_size(shape, "--calib")
+    return calib
 
 
 def _params(args):
@@ -177,6 +218,7 @@ def main_solve(args):
     from .jobs import Job, run_job
     params = _params(args)
     left, right, d_max, init, init_frame, scene = _inputs(args)
+    calib = _calibration(args, left)
     backend.init(arch=args.arch, threads=args.threads)
     has_truth = scene is not None and scene.disp_left is not None and scene.occ_left is not None
     name = scene.name if scene is not None else os.path.basename(os.path.abspath(args.out))
@@ -186,7 +228,7 @@ def main_solve(args):
               photo=args.photo)
     progress = Progress(params.max_iterations, args.quiet)
     try:
-        summary = run_job(job, args.out, params, callback=progress)
+        summary = run_job(job, args.out, params, callback=progress, calib=calib)
     finally:
         progress.close()
     if not args.quiet:

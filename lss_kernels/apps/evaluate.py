@@ -5,6 +5,7 @@ run with the paper's protocol (:func:`lss_kernels.metrics.score`) and writes, un
 
     runs/<scene>/<method>/disparity.pfm   left-view disparity (float32 PFM)
     runs/<scene>/<method>/occlusion.png   left-view occlusion mask (255 = occluded)
+    runs/<scene>/lss/confidence.pfm       lss's per-pixel confidence (lss_kernels.confidence)
     runs/<scene>/<method>/result.json     the score and the seconds of the run
     results.csv                           one row per scene and method, then a mean per method
     table.md                              occlusion F1 per scene and method beside the paper's
@@ -33,6 +34,7 @@ import imageio.v3 as iio
 import numpy as np
 
 from .. import io, metrics
+from ..flying import flying_share
 from .baselines import METHODS as BASELINES, require_opencv
 from ..params import c_max
 from ..stopping import StopRule
@@ -173,7 +175,8 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
                  "from_zero": bool(result.search.get("from_zero")),
                  "background_planes": sweep_summary(result.history)["planes_set"],
                  "bad4_surface": float(metrics.score(result.surface, result.occlusion,
-                                                     scene)["bad4"])}
+                                                     scene)["bad4"]),
+                 "confidence": result.confidence}
         if trace:
             extra["trace"] = rows
         return result.disparity, result.occlusion, extra, spent
@@ -214,12 +217,16 @@ def _run_one(scene_dir: str, method: str, run_dir: str, params, trace: bool = Fa
     disparity = np.asarray(disparity, dtype=np.float32)
     occlusion = np.asarray(occlusion, dtype=bool)
     scores = {k: _plain(v) for k, v in metrics.score(disparity, occlusion, scene).items()}
+    scores.update(flying_share(disparity, occlusion, scene))
+    confidence = extra.pop("confidence", None)
     record = {"scene": Path(scene_dir).name, "method": method, **scores, "seconds": seconds,
               **extra}
     out = Path(run_dir)
     out.mkdir(parents=True, exist_ok=True)
     io.write_pfm(out / "disparity.pfm", disparity)
     io.write_mask(out / "occlusion.png", occlusion)
+    if confidence is not None:
+        io.write_pfm(out / "confidence.pfm", confidence)
     # result.json last: its presence means the run is complete.
     tmp = out / "result.json.tmp"
     tmp.write_text(json.dumps(record, indent=1))

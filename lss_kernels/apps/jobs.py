@@ -6,12 +6,21 @@ solver of the same image size and search range, :class:`SolverCache`) and writes
 with :func:`write_outputs`::
 
     disparity.pfm    left-view disparity (float32 PFM)
+    confidence.pfm   how sure each pixel's disparity is, in [0, 1] (lss_kernels.confidence)
+    confidence.png   the same as a picture (white: sure, black: occluded or unsure)
     occlusion.png    left-view occlusion mask (255 = seen by the left camera only)
     foreground.png   left-view foreground mask
     disparity.png    colour map with occlusions in dark blue and a colour bar
     overlay.png      boundary and occlusions over the left image
     summary.json     iterations, stop reason, seconds, Theta_1, Theta_2, parameters, the
                      score when the pair has ground truth
+
+and with a calibration (:class:`lss_kernels.calib.Calibration`)::
+
+    depth.pfm        left-view depth f B / (d + doffs), the baseline's unit (inf: unknown)
+    cloud.ply        every pixel seen by both cameras: x y z, red green blue, layer
+                     (0 background, 1 the object); binary little-endian
+    object.ply       the object's pixels only
 
 The folder is written to a temporary sibling and renamed into place, so a folder that exists
 is complete.
@@ -153,10 +162,11 @@ class SolverCache:
         self.key, self.solver = None, None
 
 
-def run_job(job, out_dir, params, cache=None, callback=None, extra=None):
+def run_job(job, out_dir, params, cache=None, callback=None, extra=None, calib=None):
     """Solve ``job`` and write its folder ``out_dir``; returns the summary (the content of
     ``summary.json``).  ``cache``: a :class:`SolverCache` to reuse (else a solver of its own,
-    closed before returning); ``callback(solver, stats)`` after every iteration."""
+    closed before returning); ``callback(solver, stats)`` after every iteration; ``calib``:
+    a :class:`~lss_kernels.calib.Calibration` for the metric outputs."""
     from ..kernels import backend
     own = cache is None
     cache = SolverCache() if own else cache
@@ -177,7 +187,7 @@ def run_job(job, out_dir, params, cache=None, callback=None, extra=None):
         info["score"]["bad4_surface"] = float(
             score(result.surface, result.occlusion, job.scene)["bad4"])
     info.update(extra or {})
-    return write_outputs(out_dir, result, left, params, info, initial)
+    return write_outputs(out_dir, result, left, params, info, initial, calib)
 
 
 def _jsonable(value):
@@ -218,10 +228,30 @@ def layer_summary(result):
         window=None if result.window is None else list(result.window))
 
 
-def write_outputs(out_dir, result, left, params, extra=None, initial=None):
+def _write_metric(folder, result, left, calib):
+    """depth.pfm, cloud.ply and object.ply of ``result`` for ``calib``; returns their
+    summary (the calibration and the clouds' point counts)."""
+    from .. import io
+    from ..cloud import cloud, select, write_ply
+    io.write_pfm(os.path.join(folder, "depth.pfm"), result.depth(calib))
+    layer = (result.layers if result.layers is not None
+             else result.foreground.astype(np.uint8))
+    counts = {}
+    for name, which in (("cloud.ply", "all"), ("object.ply", "object")):
+        points = cloud(calib, result.disparity, left, layer,
+                       select(which, result.foreground, result.occlusion))
+        write_ply(os.path.join(folder, name), points)
+        counts[name] = int(len(points["xyz"]))
+    cx, cy = calib.principal_point(result.disparity.shape)
+    return dict(focal=calib.focal, baseline=calib.baseline, cx=cx, cy=cy, doffs=calib.doffs,
+                points=counts)
+
+
+def write_outputs(out_dir, result, left, params, extra=None, initial=None, calib=None):
     """Write the result files into ``out_dir`` atomically (a temporary sibling folder, then
     renamed into place); returns the summary.  ``initial``: the initial foreground (left
-    view), drawn on ``overlay.png``."""
+    view), drawn on ``overlay.png``; ``calib``: a calibration for depth.pfm and the
+    clouds."""
     from .. import io, viz
     out_dir = os.fspath(out_dir)
     parent = os.path.dirname(os.path.abspath(out_dir)) or "."
@@ -230,6 +260,9 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None):
     try:
         io.write_pfm(os.path.join(tmp, "disparity.pfm"), result.disparity)
         io.write_pfm(os.path.join(tmp, "surface.pfm"), result.surface)
+        io.write_pfm(os.path.join(tmp, "confidence.pfm"), result.confidence)
+        io.write_png(os.path.join(tmp, "confidence.png"),
+                     np.round(np.clip(result.confidence, 0, 1) * 255).astype(np.uint8))
         io.write_mask(os.path.join(tmp, "occlusion.png"), result.occlusion)
         io.write_mask(os.path.join(tmp, "foreground.png"), result.foreground)
         layers = (result.layers if result.layers is not None
@@ -255,6 +288,8 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None):
                        background_sweep=sweep_summary(result.history),
                        layers=layer_summary(result),
                        params=params.to_dict())
+        if calib is not None:
+            summary["calibration"] = _write_metric(tmp, result, left, calib)
         summary.update(extra or {})
         with open(os.path.join(tmp, "summary.json"), "w") as f:
             json.dump(summary, f, indent=1)

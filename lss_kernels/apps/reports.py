@@ -18,10 +18,13 @@ __all__ = ["COLUMNS", "MEAN_KEYS", "RULE_VARIANTS", "means", "write_convergence"
 #: Columns of ``results.csv``.
 #: ``bad4_surface``: bad-4.0 of the two quadratics before the refinement (lss; NaN for the
 #: peers, which have no surface model).
+#: ``flying``: percent of the band's cloud points off both true surfaces
+#: (:mod:`lss_kernels.flying`).
 COLUMNS = ("scene", "method", "occ_f1", "occ_precision", "occ_recall", "bad4", "bad4_surface",
-           "seconds")
+           "flying", "seconds")
 #: The columns averaged per method.
-MEAN_KEYS = ("occ_f1", "occ_precision", "occ_recall", "bad4", "bad4_surface", "seconds")
+MEAN_KEYS = ("occ_f1", "occ_precision", "occ_recall", "bad4", "bad4_surface", "flying",
+             "seconds")
 
 
 def means(rows, method: str) -> dict:
@@ -84,6 +87,8 @@ def write_table(path: Path, rows, names, methods, dataset_dir: Path) -> None:
     lines.append("| **mean bad-4.0, two quadratics (%)** | " + " | ".join(
         [fmt(by_method[m]["bad4_surface"], ".2f") for m in methods] + ["–"] * len(paper))
         + " |")
+    lines.append("| **mean flying pixels (% of the band's points)** | " + " | ".join(
+        [fmt(by_method[m]["flying"], ".2f") for m in methods] + ["–"] * len(paper)) + " |")
     lines.append("| **seconds per scene** | " + " | ".join(
         [fmt(by_method[m]["seconds"], ".2f") for m in methods] + ["–"] * len(paper)) + " |")
     text = [f"# Occlusion F1 on {dataset_dir.name} ({len(names)} scenes)", ""] + lines

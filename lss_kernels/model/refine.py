@@ -60,8 +60,12 @@ class LayerRefinement:
 
     After :meth:`run`, ``surface`` holds the refined map and ``weight`` 1 on the pixels
     whose last pass kept a distinct match of their own (the others took their layer's
-    average from their neighbours).  The planes have the shape of the image's size bucket
-    and the kernels read ``H`` and ``W`` at run time from the pool's
+    average from their neighbours); ``match`` their match (left-view disparity; the
+    surface elsewhere) and ``peak_ratio`` every pixel's best cost over its second best
+    (step 2's test; 1 where no second candidate has a cost or both costs are 0), the
+    largest of the passes: the wide first pass sees a period that the narrow last one
+    cannot.  :mod:`lss_kernels.confidence` reads them.  The planes have the shape of the
+    image's size bucket and the kernels read ``H`` and ``W`` at run time from the pool's
     :class:`~lss_kernels.kernels.backend.Extent`: they compile once per bucket.
     """
 
@@ -84,6 +88,8 @@ class LayerRefinement:
         self.costs = field(ti.f32, shape + (self.K,))
         self.residual = field(ti.f32, shape)
         self.weight = field(ti.f32, shape)
+        self.match = field(ti.f32, shape)          # the last pass's best candidate
+        self.peak_ratio = field(ti.f32, shape)     # the best over the second, every pass's
         # box sums of a 4-channel source, a value and its weight per layer (value fg,
         # value bg, weight fg, weight bg): its row prefix sums, the column prefix sums of
         # their row boxes, the box, and the residual's average (the sums of both boxes)
@@ -157,6 +163,7 @@ class LayerRefinement:
             self.surface[y, x] = ti.min(s, d_max)
             self.label[y, x] = 1 - foreground[y, x]
             self.visible[y, x] = 1 - occlusion[y, x]
+            self.peak_ratio[y, x] = 0.0
 
     @ti.kernel
     def _start_pass(self, R: ti.i32):
@@ -237,6 +244,11 @@ class LayerRefinement:
                     w = 1.0
             self.residual[y, x] = r
             self.weight[y, x] = w
+            self.match[y, x] = r + self.surface[y, x]
+            ratio_here = 1.0                       # flat: no second cost, or both 0
+            if second < NO_COST and second > 0:
+                ratio_here = best / second
+            self.peak_ratio[y, x] = ti.max(self.peak_ratio[y, x], ratio_here)
 
     @ti.kernel
     def _residual_source(self):

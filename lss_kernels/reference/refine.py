@@ -10,7 +10,7 @@ from ..model import FIXED_POINT_STEPS
 from ..model.occlusion import STRIP_EVIDENCE
 from .kernels import box_sum, census
 
-__all__ = ["left_cost", "refine_layers", "occluded_strips"]
+__all__ = ["left_cost", "refine_layers", "refine_with_evidence", "occluded_strips"]
 
 
 def left_cost(left, right, d, censuses):
@@ -36,12 +36,23 @@ def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ra
     parabola, the layer-restricted average of its residual (its denominator at least
     ``support`` times the boxes' layer pixels), added to S and clamped.  S starts clamped
     to ``[0, d_max]`` (non-finite: 0)."""
+    return refine_with_evidence(left, right, surface, foreground, occlusion, d_max, passes,
+                                ratio, support, wide_weight)[0]
+
+
+def refine_with_evidence(left, right, surface, foreground, occlusion, d_max, passes, ratio,
+                         support=0.0, wide_weight=0.05):
+    """:func:`refine_layers` with the refinement's evidence: ``(S, match, peak_ratio)``, the
+    match the distinct pixels of the last pass kept (the pass's surface elsewhere) and
+    every pixel's best cost over its second best (1 where no second candidate has a cost or
+    both costs are 0), the largest of the passes."""
     H, W = surface.shape
     S = np.asarray(surface, np.float64)
     S = np.clip(np.where(np.isfinite(S), S, 0.0), 0.0, d_max)
     layers = [np.asarray(foreground, bool), ~np.asarray(foreground, bool)]
     visible = ~np.asarray(occlusion, bool)
     censuses = census(left), census(right)
+    peak_ratio = np.zeros((H, W))
     costs_by_d = {d: left_cost(left, right, d, censuses) for d in range(int(d_max) + 1)}
     for R, window, smoothing in passes:
         base = np.round(S).astype(int)
@@ -69,6 +80,11 @@ def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ra
             den = cm - 2 * best + cp
             sub = np.where(ok & (den > 0), 0.5 * (cm - cp) / den, 0.0)
         residual = np.where(ok, base + kb - R + sub - S, 0.0)
+        match = S + residual
+        with np.errstate(invalid="ignore"):
+            peak_ratio = np.maximum(peak_ratio, np.where(
+                np.isfinite(second) & (second > 0), best / np.where(second > 0, second, 1.0),
+                1.0))
         weight = ok.astype(float)
         boxes = lambda a: (box_sum(a, 2 * smoothing + 1)
                            + wide_weight * box_sum(a, 8 * smoothing + 1))
@@ -77,7 +93,7 @@ def refine_layers(left, right, surface, foreground, occlusion, d_max, passes, ra
             den = np.maximum(boxes(weight * lab), support * boxes(lab.astype(float)))
             S = np.where(lab & (den > 0), S + num / np.where(den > 0, den, 1.0), S)
         S = np.clip(S, 0.0, d_max)
-    return S
+    return S, match, peak_ratio
 
 
 def occluded_strips(foreground, surface, refined, matched, near, far, steps=FIXED_POINT_STEPS,
