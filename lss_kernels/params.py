@@ -45,7 +45,7 @@ class Params:
     median_size : int
         Side of the median filter applied to phi after every step (odd).
     max_iterations : int
-        Iteration cap (the paper runs 1500).
+        Iteration cap (the authors' release runs 1500 iterations; the paper gives no count).
     min_iterations : int
         The stopping rule is not consulted before this many iterations (three windows: the
         boundary has been re-initialised and the background swept a few times).
