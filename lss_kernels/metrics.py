@@ -1,4 +1,4 @@
-"""Occlusion F1 and bad-4.0 near the true boundary: the paper's protocol (Sec. 6).
+"""Occlusion F1 and bad-4.0 near the true boundary: the paper's protocol (Sec. 4).
 
 Following ``docs/scene-format.md`` (the authors' release), with all arrays ``(H, W)`` in the left view:
 

@@ -3,7 +3,7 @@
 A textured foreground surface with an elliptic (or rectangular, L-shaped, blob) outline floats
 in front of a textured background surface.  Each surface ``S`` is a disparity function quadratic
 in the LEFT-view pixel coordinates, ``d_S(x, y) = Theta_S . U(x, y)`` with the paper's basis
-``U = (x^2, xy, y^2, x, y, 1)`` (Sec. 3; 0-based pixels, x to the right, y down), and a scene
+``U = (x^2, xy, y^2, x, y, 1)`` (Sec. 2; 0-based pixels, x to the right, y down), and a scene
 point is named by the left-view coordinates ``(x, y)`` of its ray.  Its right-view position is
 ``x - d_S(x, y)`` (same row), and its colour is a texture sampled at ``(x, y)``, so one scene point
 has one colour in both views.
