@@ -26,8 +26,9 @@ FAST = Params(max_iterations=ITERATIONS)
 #: since Taichi's offline cache keys kernels on them too, so that the workers load the
 #: kernels of the tiny scenes that earlier tests compiled
 THREADS = os.cpu_count()
-FILES = {"disparity.pfm", "surface.pfm", "occlusion.png", "foreground.png", "disparity.png", "overlay.png",
-         "confidence.pfm", "confidence.png", "summary.json"}
+FILES = {"disparity.pfm", "surface.pfm", "occlusion.png", "foreground.png", "disparity.png",
+         "overlay.png", "confidence.pfm", "confidence.png", "layers.png", "layers_overlay.png",
+         "summary.json"}
 MAPS = ("disparity.pfm", "occlusion.png", "foreground.png")
 
 

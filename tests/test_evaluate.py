@@ -199,7 +199,7 @@ def test_trace_scores_every_stop_window_and_replays_the_rule(dataset, tmp_path):
 
 
 def test_unknown_method(dataset, tmp_path):
-    with pytest.raises(ValueError, match=r"unknown method\(s\) 'kz'; valid: lss, sgm, bm-lr"):
+    with pytest.raises(ValueError, match=r"unknown method\(s\) 'kz'; valid: lss, lss-photo, sgm, bm-lr"):
         run_eval(dataset, methods=("sgm", "kz"), out=tmp_path)
 
 
@@ -243,7 +243,7 @@ def test_cli_trace_flag_reaches_run_eval(dataset, tmp_path, monkeypatch):
 def test_cli_one_line_errors(dataset, tmp_path, capsys, monkeypatch):
     assert _cli(["eval", str(dataset), "--methods", "sgm,hsm", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "valid: lss, sgm, bm-lr" in err
+    assert err.count("\n") == 1 and "valid: lss, lss-photo, sgm, bm-lr" in err
     monkeypatch.setitem(sys.modules, "cv2", None)
     assert _cli(["eval", str(dataset), "--methods", "sgm", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
