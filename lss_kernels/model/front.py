@@ -32,9 +32,10 @@ From these,
   front pixel beside the object, over the background, hides a wider strip of background
   than this; that strip keeps its data term.
 
-Hidden pixels carry no evidence: they leave both Eq. 8 fits and Eq. 2's data term, so phi
-moves there by its curvature and the median alone, and the object's support continues
-under a thin occluder.  The left-view layer map and the occlusion that the front layer
+Hidden pixels carry no evidence of their own: they leave both Eq. 8 fits, and Eq. 2's data
+term over them is carried in from the visible pixels beside them
+(:meth:`lss_kernels.model.levelset.LevelSet._carry_hidden`), so the object's support
+continues under a thin occluder where the object lies on both sides of it.  The left-view layer map and the occlusion that the front layer
 casts are :mod:`lss_kernels.model.layers`.
 
 Frame: cyclopean; planes of the image's size bucket (``H`` and ``W`` read at run time).
@@ -51,8 +52,8 @@ MAJORITY = 5
 SUPPORT = 12
 #: How far from the object (phi's zero level) a pixel can be in front, pixels.
 REACH = 24.0
-#: How much lower than at Theta_1 a front pixel's least cost must be (M is a mean absolute
-#: difference of colours in [0, 1]).
+#: How much lower than at both surfaces a front pixel's least cost must be (M is a mean
+#: absolute difference of colours in [0, 1]).
 COST_GAP = 0.05
 
 
