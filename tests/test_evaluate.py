@@ -238,12 +238,21 @@ def test_cli_trace_flag_reaches_run_eval(dataset, tmp_path, monkeypatch):
     assert seen["trace"] is True
     assert _cli(["eval", str(dataset), "--methods", "lss", "--out", str(tmp_path)]) == 0
     assert seen["trace"] is False
+    assert _cli(["eval", str(dataset), "--methods", "lss", "--out", str(tmp_path), "--params",
+                 "paper", "--param", "front_margin=4", "--param", "mu=3"]) == 0
+    assert seen["params"] == Params.paper(front_margin=4.0, mu=3.0)
 
 
 def test_cli_one_line_errors(dataset, tmp_path, capsys, monkeypatch):
     assert _cli(["eval", str(dataset), "--methods", "sgm,hsm", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "valid: lss, lss-photo, sgm, bm-lr" in err
+    for bad, what in (("nosuch=1", "a parameter of Params"), ("mu=big", "expected a float"),
+                      ("front_margin=-1", "params.front_margin")):
+        assert _cli(["eval", str(dataset), "--methods", "lss", "--out", str(tmp_path),
+                     "--param", bad]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and what in err
     monkeypatch.setitem(sys.modules, "cv2", None)
     assert _cli(["eval", str(dataset), "--methods", "sgm", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err

@@ -116,11 +116,12 @@ def _calibration(args, left):
     return calib
 
 
-def _params(args):
-    from ..params import Params
-    defaults = Params.paper() if getattr(args, "params", "default") == "paper" else Params()
+def param_changes(items, defaults) -> dict:
+    """``{name: value}`` from ``--param NAME=VALUE`` items, each value read as the type of
+    the field of ``defaults`` (a :class:`~lss_kernels.Params`); a one-line ``CliError``
+    otherwise."""
     changes = {}
-    for item in args.param:
+    for item in items:
         name, sep, value = item.partition("=")
         if not sep or not hasattr(defaults, name):
             raise CliError(f"--param: expected NAME=VALUE with a parameter of Params, "
@@ -144,6 +145,13 @@ def _params(args):
         except ValueError:
             raise CliError(f"--param {name}: expected a {type(current).__name__}, "
                            f"got {value!r}") from None
+    return changes
+
+
+def _params(args):
+    from ..params import Params
+    defaults = Params.paper() if getattr(args, "params", "default") == "paper" else Params()
+    changes = param_changes(args.param, defaults)
     if args.max_iterations is not None:
         changes["max_iterations"] = args.max_iterations
     if getattr(args, "no_refine", False):

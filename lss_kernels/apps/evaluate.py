@@ -452,6 +452,9 @@ def add_cli(subparsers) -> None:
     p.add_argument("--params", choices=("default", "paper"), default="default",
                    help="lss's parameter set: default (recommended) or paper (the paper's "
                         "method and nothing beyond it, Params.paper; use its own --out)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a parameter of that set (repeatable), e.g. --param "
+                        "front_margin=4 (use its own --out)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=main_eval)
 
@@ -460,8 +463,17 @@ def main_eval(args) -> int:
     """Handler of ``lss eval``: 0 on success, 2 with a one-line message on a usage error
     (unknown method, missing OpenCV, no such folder, no scenes)."""
     from ..params import Params
+    from .cli import CliError, param_changes
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    params = Params.paper() if args.params == "paper" else None
+    try:
+        params = Params.paper() if args.params == "paper" else Params()
+        changes = param_changes(args.param, params)
+        params = params.replace(**changes) if changes else params
+        if args.params == "default" and not changes:
+            params = None                      # run_eval's default, Params()
+    except (CliError, ValueError) as error:
+        print(f"lss eval: error: {error}", file=sys.stderr)
+        return 2
     try:
         rows = run_eval(args.dataset_dir, methods=methods, out=args.out, jobs=args.jobs,
                         force=args.force, arch=args.arch, params=params,
