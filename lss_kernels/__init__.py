@@ -15,9 +15,12 @@ __version__ = "0.1.0"
 
 def __getattr__(name):
     # The solver pulls in Taichi kernels; import it only when asked for.
-    if name in ("Result", "Solver", "solve"):
+    if name in ("Result", "Solver"):
         from . import solver
         return getattr(solver, name)
+    if name == "solve":
+        from .checks.around import solve
+        return solve
     if name == "solve_photo":
         from . import photo
         return photo.solve_photo

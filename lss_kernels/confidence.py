@@ -16,10 +16,10 @@ A pixel's disparity can be wrong for five reasons the model can see:
 - the refinement's **residual**: its own distinct match disagrees with the answer (the
   layer's surface plus the smoothed residual of its neighbours);
 - the left image is **periodic** around it along the rows
-  (:func:`lss_kernels.recovery.periodicity`): a match there is one of several equally good,
-  whatever its peak ratio over a range shorter than the period says.  A periodic pair is
-  solved without the refinement first (:mod:`lss_kernels.recovery`), and then this is the
-  only evidence about its matches.
+  (:func:`lss_kernels.checks.periodicity.periodicity`): a match there is one of several
+  equally good, whatever its peak ratio over a range shorter than the period says.  A
+  periodic pair is solved without the refinement first (:mod:`lss_kernels.checks.recovery`),
+  and then this is the only evidence about its matches.
 
 The confidence is the product of one factor in ``[0, 1]`` per reason (:func:`confidence`).
 It ranks pixels; it is not a probability.
@@ -114,13 +114,14 @@ def local_stability(distinct, radius: int = STABILITY_WINDOW) -> np.ndarray:
     return _box_mean(_mask(distinct, "distinct").astype(float), radius)
 
 
-def periodic_map(image) -> np.ndarray:
-    """:func:`lss_kernels.recovery.periodicity` of ``image`` ``(H, W, 3)`` per pixel
-    ``(H, W)``: each pixel takes its tile's score (the pixels past the last tile, the
-    nearest tile's); 0 everywhere for an image smaller than a tile."""
-    from .periodicity import TILE, periodicity
+def periodic_map(image, score=None) -> np.ndarray:
+    """:func:`lss_kernels.checks.periodicity.periodicity` of ``image`` ``(H, W, 3)`` per
+    pixel ``(H, W)`` (``score``: that periodicity, when it is known): each pixel takes its
+    tile's score (the pixels past the last tile, the nearest tile's); 0 everywhere for an
+    image smaller than a tile."""
+    from .checks.periodicity import TILE, periodicity
     H, W = np.asarray(image).shape[:2]
-    score = periodicity(image)
+    score = periodicity(image) if score is None else score
     if score.size == 0:
         return np.zeros((H, W))
     rows = np.minimum(np.arange(H) // TILE[0], score.shape[0] - 1)
@@ -198,7 +199,7 @@ def of_solver(solver, disparity, foreground, occlusion) -> np.ndarray:
         evidence = (np.clip(user(refinement.match) - solver.offset, 0.0, solver.d_max),
                     user(refinement.peak_ratio), user(refinement.weight) > 0.5)
     return confidence(disparity, foreground, occlusion, *evidence,
-                      periodic_map(solver.left_image))
+                      periodic_map(solver.left_image, solver.pair.periodicity))
 
 
 def sparsification(confidence, bad, fractions=None):

@@ -204,8 +204,8 @@ def solve_photo(left, right, d_max, init, params=None, arch=None, callback=None)
         with the third layer, ``OUTSIDE`` beyond the window), ``window`` ``(x0, y0, x1, y1)``, and
         ``recovery["windows"]``: each window solved, the sides the object touched, seconds.
     """
-    from .solver import solve
-    from .validate import check_inputs
+    from .checks.around import solve
+    from .checks.validate import check_inputs
     params = params if params is not None else Params()
     left, right, d_max, init = check_inputs(left, right, d_max, init, "left", params)
 

@@ -25,8 +25,9 @@ class Result:
     disparity (2 Theta_j) over the basis {x^2, xy, y^2, x, y, 1} of raw cyclopean pixel
     coordinates.  ``iterations`` run, ``stop_reason``, ``timings`` (seconds per stage) and
     ``history`` (per-iteration statistics); ``recovery``: whether the model collapsed and
-    was solved again (:mod:`lss_kernels.recovery`; set by :func:`solve`, not by ``run``);
-    ``photometry``: the right view's photometric correction (:mod:`lss_kernels.photometry`);
+    was solved again (:mod:`lss_kernels.checks.recovery`; set by :func:`solve`, not by
+    ``run``); ``photometry``: the right view's photometric correction
+    (:mod:`lss_kernels.checks.photometry`);
     ``search``: where the disparity grid started, 2 or 0 px (:mod:`lss_kernels.model.offset`).
     ``layers``: uint8 ``(H, W)``, left view: 0 background, 1 the object (``foreground``), 2 in
     front of it (:mod:`lss_kernels.model.layers`; only with ``Params.front_margin``).

@@ -1,5 +1,5 @@
-"""The alternation of Sec. 3 (stopping: :mod:`lss_kernels.stopping`); the public ``solve`` /
-``Solver`` / ``Result``.
+"""The alternation of Sec. 3 (stopping: :mod:`lss_kernels.stopping`); the public ``Solver`` /
+``Result`` (``solve``, the checks around a solver: :mod:`lss_kernels.checks.around`).
 
 One iteration (as in the authors' release, with everything a data-parallel kernel):
 
@@ -24,6 +24,8 @@ import warnings
 import numpy as np
 import taichi as ti
 
+from .checks.pair import CheckedPair
+from .checks.validate import check_memory, check_params
 from .kernels import backend
 from .kernels.backend import FieldPool
 from .model import STAGES
@@ -38,16 +40,16 @@ from .model.messages import Messages
 from .model.offset import SHIFT, model_pair, search_range, to_user_left
 from .model.occlusion import OcclusionGeometry
 from .model.refine import LayerRefinement
-from .params import Params, c_max
+from .params import c_max
 from .confidence import of_solver
-from .photometry import equalise
 from .result import Result
 from .model.shapes import GlobalShapes
 from .model.sweep import BackgroundSweep
 from .model.start import initial_region
+from .start_types import UnreliableStartWarning
 from .stopping import StopRule
 
-__all__ = ["Result", "Solver", "solve"]
+__all__ = ["Result", "Solver"]
 
 #: Widest layer in front of the object that a point's start is carried across (a rod, a
 #: handle), cyclopean pixels (:meth:`lss_kernels.model.init.InitialRegion.bridge`).
@@ -65,7 +67,9 @@ class Solver:
     Parameters
     ----------
     left, right : array ``(H, W[, C])`` or path
-        Rectified pair; the left image is the reference.
+        Rectified pair; the left image is the reference.  ``left`` may be a
+        :class:`~lss_kernels.checks.pair.CheckedPair`, checked before: the other arguments
+        up to ``init_frame`` are then its own.
     d_max : float
         Largest disparity to search, in left-view pixels (cyclopean ``c_max = ceil(d_max /
         2)``; one more for a pair searched from 0 px, :mod:`lss_kernels.model.offset`).
@@ -97,19 +101,16 @@ class Solver:
 
     def __init__(self, left, right, d_max, init, params=None, arch=None, init_frame="left",
                  profile=False):
-        from .validate import check_inputs
         t_start = time.perf_counter()
         backend.before_solver(arch)
-        self.params = params if params is not None else Params()
-        if not isinstance(self.params, Params):
-            raise TypeError(f"params: expected lss_kernels.Params, got {type(params).__name__}")
-        left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame, self.params)
-        self.H, self.W = left.shape[:2]
+        self.params = check_params(params)
+        pair = CheckedPair.of(left, right, d_max, init, init_frame, self.params)
+        self.H, self.W = pair.left.shape[:2]
         self.profile = profile
         self.pool, self._grids = None, {}
-        self.c_release = c_max(d_max)   # the authors' grid; a pair from 0 px holds one more
+        self.c_release = c_max(pair.d_max)  # the authors' grid; a pair from 0 px: one more
         self._use(self.c_release)
-        self._load(left, right, d_max, init, init_frame, t_start)
+        self._load(pair, t_start)
 
     def _use(self, C):
         """Make the fields and kernels of ``C`` cyclopean candidates the solve's, zeroed: built
@@ -128,7 +129,6 @@ class Solver:
 
     def _build(self, C):
         """The fields and kernels of a solve with ``C`` cyclopean candidates, in a new pool."""
-        from .validate import check_memory
         H, W = self.H, self.W
         check_memory(H, W, 2 * C)       # before the first field: a new pool's allocation
         self.c_max = C
@@ -165,27 +165,24 @@ class Solver:
 
         Arguments as for :class:`Solver`; the state is exactly that of a new solver.
         """
-        from .validate import check_inputs
         t_start = time.perf_counter()
         if self.pool is None:
             raise RuntimeError("reset: the solver is closed; build a new Solver")
-        left, right, d_max, init = check_inputs(left, right, d_max, init, init_frame,
-                                                self.params)
+        pair = CheckedPair.of(left, right, d_max, init, init_frame, self.params)
+        left, d_max = pair.left, pair.d_max
         if left.shape[:2] != (self.H, self.W) or c_max(d_max) != self.c_release:
             raise ValueError(f"reset: expected a {self.W}x{self.H} pair with ceil(d_max / 2) = "
                              f"{self.c_release} (this solver's fields), got "
                              f"{left.shape[1]}x{left.shape[0]} with d_max {d_max}; build a "
                              f"new Solver for it")
         self._use(self.c_release)
-        self._load(left, right, d_max, init, init_frame, t_start)
+        self._load(pair, t_start)
 
-    def _load(self, left, right, d_max, init, init_frame, t_start):
+    def _load(self, pair, t_start):
         """Set-up of a solve in zeroed fields: images, cost volumes, the initial phi."""
-        self.left_image = left
-        self.d_max = float(d_max)
-        self.photometry = {"correct": False, "why": "Params.photometric is False"}
-        if self.params.photometric:
-            right, self.photometry = equalise(left, right, d_max)
+        left, d_max, init, init_frame = pair.left, pair.d_max, pair.init, pair.init_frame
+        self.pair, self.left_image, self.d_max = pair, left, d_max
+        right, self.photometry = pair.right_view(self.params.photometric)
 
         t0 = time.perf_counter()
         self._load_pair(left, right, 0)
@@ -237,16 +234,11 @@ class Solver:
     def _initial_mask(self, init, init_frame):
         """The initial foreground in the cyclopean frame
         (:func:`lss_kernels.model.start.initial_region`); also keeps it in the left view."""
-        from .periodicity import periodic_share
-        from .recovery import UnreliableStartWarning
         h = self.hierarchy
-        periodic = []             # the left image's periodic share, once a start needs it
 
         def find(start):
-            if not periodic:
-                periodic.append(periodic_share(self.left_image))
             region, frame = self.initialiser.find(start, h.consensus_mean, h.precision,
-                                                  periodic=periodic[0])
+                                                  periodic=self.pair.periodic_share)
             return region, frame, self.initialiser.info, self.initialiser.grown
 
         mask, self.initial_left, self.init_info = initial_region(
@@ -507,33 +499,3 @@ class Solver:
         """Bytes held by the solver's fields, distance-transform scratch included."""
         return sum(g["pool"].nbytes + g["levelset"].scratch_bytes + g["costs"].scratch_bytes
                    for g in self._all_grids())
-
-
-def solve(left, right, d_max, init, params=None, arch=None, callback=None, init_frame="left",
-          profile=False):
-    """Solve a rectified pair with the two-layer level-set model (the whole paper).
-
-    Arguments as for :class:`Solver` (swapped views warn
-    :class:`~lss_kernels.recovery.SwappedViewsWarning` before the solve), and ``callback``:
-    ``callback(solver, stats)`` after every iteration; return ``False`` to stop.
-
-    Returns
-    -------
-    Result
-        Left-view disparity, occlusion and foreground; the model (phi, Theta) and the
-        consensus in the cyclopean frame.
-
-    References
-    ----------
-    J. Wang and T. Zickler, "Level Set Stereo for Cooperative Grouping with Occlusion".
-    """
-    from .recovery import with_recovery
-
-    def run(p):
-        solver = Solver(left, right, d_max, init, params=p, arch=arch, init_frame=init_frame,
-                        profile=profile)
-        try:
-            return solver.run(callback), None
-        finally:
-            solver.close()
-    return with_recovery(run, params if params is not None else Params(), d_max, left, right)[0]

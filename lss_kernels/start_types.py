@@ -1,11 +1,12 @@
 """What a solve can start from, besides an ellipse or a mask: ``AUTO``, a :class:`Point` or a
 :class:`Box` (left-view pixels, 0-based, x to the right, y down), and the error raised when no
-foreground is found from them.  No dependencies: the model finds the region
-(:mod:`lss_kernels.model.init`), the input checks read the types (:mod:`lss_kernels.validate`).
+foreground is found from them, or the warning that it may be the wrong one.  No
+dependencies: the model finds the region (:mod:`lss_kernels.model.init`), the input checks
+read the types (:mod:`lss_kernels.checks.validate`).
 """
 from dataclasses import dataclass
 
-__all__ = ["AUTO", "Box", "InitError", "Point"]
+__all__ = ["AUTO", "Box", "InitError", "Point", "UnreliableStartWarning"]
 
 #: Find the object without any hint (:class:`~lss_kernels.model.init.InitialRegion`).
 AUTO = "auto"
@@ -13,6 +14,12 @@ AUTO = "auto"
 
 class InitError(ValueError):
     """No foreground could be found from the given initialisation."""
+
+
+class UnreliableStartWarning(UserWarning):
+    """``init="auto"`` found its start on a periodic left image, whose first consensus the
+    stripes make ambiguous: the start, and so the answer, may be the wrong region
+    (:mod:`lss_kernels.model.init`)."""
 
 
 @dataclass(frozen=True)

@@ -2,8 +2,8 @@
 that names the argument, what was expected and what was given (never a Taichi or numpy
 traceback); gray, RGBA and 16-bit images are accepted and converted.
 
-API cases go through :func:`lss_kernels.validate.check_inputs` (what ``Solver`` calls before it
-allocates anything) or ``Solver`` itself; CLI cases run ``lss solve`` through
+API cases go through :func:`lss_kernels.checks.validate.check_inputs` (what ``Solver`` calls
+before it allocates anything) or ``Solver`` itself; CLI cases run ``lss solve`` through
 :func:`lss_kernels.apps.cli.main` and check exit status 2, one line on stderr and no ``--out``.
 """
 import re
@@ -17,7 +17,7 @@ import pytest
 from lss_kernels import Params, Solver
 from lss_kernels.apps.cli import main
 from lss_kernels.io import read_image
-from lss_kernels.validate import check_init, check_inputs, parse_init
+from lss_kernels.checks.validate import check_init, check_inputs, parse_init
 
 H, W = 48, 64
 P = Params()
@@ -367,7 +367,7 @@ def test_solver_validates_before_allocating(ti_arch):
 
 def test_fields_bytes_is_a_little_under_what_a_solver_holds(ti_arch):
     from lss_kernels.scenes import make_scene
-    from lss_kernels.validate import fields_bytes
+    from lss_kernels.checks.validate import fields_bytes
     for preset in ("tiny", "easy"):
         scene = make_scene(preset)
         solver = Solver(scene.left, scene.right, scene.d_max, tuple(scene.init_ellipse),
@@ -378,7 +378,7 @@ def test_fields_bytes_is_a_little_under_what_a_solver_holds(ti_arch):
 
 
 def test_a_pair_too_large_for_the_memory_is_refused_before_allocating(ti_arch, monkeypatch):
-    from lss_kernels import validate
+    from lss_kernels.checks import validate
     a, b = _pair()
     monkeypatch.setattr(validate, "available_memory", lambda: 2**20)
     with pytest.raises(ValueError, match=r"^left: a 64x48 pair searched to d_max 12 needs about "
@@ -513,7 +513,7 @@ def test_cli_failure_keeps_an_existing_out_untouched(capsys, tmp_path, pair_file
 
 
 def test_cli_pair_too_large_for_the_memory(capsys, tmp_path, pair_files, ti_arch, monkeypatch):
-    from lss_kernels import validate
+    from lss_kernels.checks import validate
     monkeypatch.setattr(validate, "available_memory", lambda: 2**20)
     left, right = pair_files
     message = _cli(capsys, tmp_path, [left, right, "--dmax", "12", "--init",

@@ -88,7 +88,7 @@ def test_sparsification_counts_by_hand():
 
 def test_a_periodic_image_lowers_the_confidence():
     from lss_kernels.confidence import periodic_map
-    from lss_kernels.periodicity import TILE
+    from lss_kernels.checks.periodicity import TILE
     H, W = 2 * TILE[0] + 5, 2 * TILE[1] + 40
     x = np.arange(W)
     rng = np.random.default_rng(0)

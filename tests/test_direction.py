@@ -1,4 +1,4 @@
-"""Swapped views are recognised before the solve (``lss_kernels.direction``) and reported."""
+"""Swapped views are recognised before the solve (``lss_kernels.checks.direction``) and reported."""
 import json
 import re
 import warnings
@@ -7,9 +7,16 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from lss_kernels import Params, direction
-from lss_kernels.recovery import SwappedViewsWarning, with_recovery
+from lss_kernels import Params
+from lss_kernels.checks import direction
+from lss_kernels.checks.pair import CheckedPair
+from lss_kernels.checks.recovery import SwappedViewsWarning, with_recovery
 from lss_kernels.scenes import make_scene
+
+
+def checked(left, right, d_max):
+    """The pair as :func:`lss_kernels.solve` checks it, started automatically."""
+    return CheckedPair(left, right, d_max, "auto", "left", Params())
 
 
 def shifted_pair(shift=4, shape=(40, 96), seed=0):
@@ -76,7 +83,7 @@ def test_with_recovery_warns_before_the_solve_and_records_the_check():
             warned_before.append(sum(issubclass(w.category, SwappedViewsWarning)
                                      for w in caught))
             return sound_model(), None
-        result, _ = with_recovery(run, Params(), 10.0, right, left)
+        result, _ = with_recovery(run, Params(), 10.0, checked(right, left, 10.0))
     swapped = [w for w in caught if issubclass(w.category, SwappedViewsWarning)]
     assert warned_before == [1] and result.recovery["direction"]["swapped"]
     assert "pass the two images the other way round" in str(swapped[0].message)
@@ -85,15 +92,17 @@ def test_with_recovery_warns_before_the_solve_and_records_the_check():
         return sound_model(), None
     with warnings.catch_warnings():
         warnings.simplefilter("error", SwappedViewsWarning)
-        result, _ = with_recovery(solve_sound, Params(), 10.0, left, right)
+        result, _ = with_recovery(solve_sound, Params(), 10.0,
+                                  checked(left, right, 10.0))
     assert result.recovery["direction"]["swapped"] is False
     assert result.recovery["range"]["short"] is False
-    result, _ = with_recovery(solve_sound, Params(), 10.0, left)   # no right image: no check
+    result, _ = with_recovery(solve_sound, Params(), 10.0)   # no pair: no check
     assert "direction" not in result.recovery and "range" not in result.recovery
     # swapped: the range of the stated direction says nothing, and is not checked
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SwappedViewsWarning)
-        result, _ = with_recovery(solve_sound, Params(), 10.0, right, left)
+        result, _ = with_recovery(solve_sound, Params(), 10.0,
+                                  checked(right, left, 10.0))
     assert result.recovery["range"] == {}
 
 
@@ -122,7 +131,7 @@ def test_a_gain_between_the_views_does_not_look_like_a_short_range():
 
 
 def test_the_rendered_scene_with_a_short_range_warns_before_the_solve():
-    from lss_kernels.recovery import ShortRangeWarning
+    from lss_kernels.checks.recovery import ShortRangeWarning
     scene = make_scene("easy", seed=1)                  # foreground at 24 px, d_max 26
     warned_before = []
     with warnings.catch_warnings(record=True) as caught:
@@ -131,14 +140,16 @@ def test_the_rendered_scene_with_a_short_range_warns_before_the_solve():
         def run(params):
             warned_before.append(len(caught))
             return sound_model(), None
-        result, _ = with_recovery(run, Params(), 14.0, scene.left, scene.right)
+        result, _ = with_recovery(run, Params(), 14.0,
+                                  checked(scene.left, scene.right, 14.0))
     assert warned_before == [1] and issubclass(caught[0].category, ShortRangeWarning)
     assert str(caught[0].message).startswith("the search range looks too short: ")
     assert str(caught[0].message).endswith("give a larger d_max (--dmax)")
     assert result.recovery["range"]["short"] and result.recovery["range"]["beyond"] > 0.2
     with warnings.catch_warnings():
         warnings.simplefilter("error", ShortRangeWarning)
-        result, _ = with_recovery(run, Params(), scene.d_max, scene.left, scene.right)
+        result, _ = with_recovery(run, Params(), scene.d_max,
+                                  checked(scene.left, scene.right, scene.d_max))
     assert not result.recovery["range"]["short"]
 
 
@@ -167,7 +178,7 @@ def test_lss_solve_prints_the_warning_and_records_it(ti_arch, tmp_path, capsys):
 
 
 def test_named_warnings_give_the_library_warnings_again_with_the_name_also_on_failure():
-    from lss_kernels.recovery import UnreliableStartWarning, named_warnings
+    from lss_kernels.checks.recovery import UnreliableStartWarning, named_warnings
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         with named_warnings("scene_a"):

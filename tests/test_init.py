@@ -11,7 +11,7 @@ import pytest
 from lss_kernels import Box, Point
 from lss_kernels.kernels import backend
 from lss_kernels.reference import kernels as ref
-from lss_kernels.validate import check_init, parse_init
+from lss_kernels.checks.validate import check_init, parse_init
 
 
 def _iou(a, b):
@@ -244,7 +244,7 @@ def test_auto_finds_an_object_3_px_in_front(easy):
 
 
 def test_auto_on_a_textured_scene_records_no_periodicity_and_does_not_warn(easy):
-    from lss_kernels.recovery import UnreliableStartWarning
+    from lss_kernels.checks.recovery import UnreliableStartWarning
     scene, solver = easy
     with warnings.catch_warnings():
         warnings.simplefilter("error", UnreliableStartWarning)
@@ -255,10 +255,10 @@ def test_auto_on_a_textured_scene_records_no_periodicity_and_does_not_warn(easy)
 def test_auto_on_a_striped_background_warns_that_its_start_may_be_wrong(fresh_taichi):
     """The stripes leave the first consensus ambiguous (stress scene ``periodic_bg_p6``:
     auto's start covers a sliver of the object): auto goes on, says so and records it."""
-    from lss_kernels.periodicity import PERIODIC_AREA
-    from lss_kernels.recovery import UnreliableStartWarning
+    from lss_kernels.checks.periodicity import PERIODIC_AREA
+    from lss_kernels.checks.recovery import UnreliableStartWarning
     from lss_kernels.scenes import make_scene
-    from lss_kernels.solver import Params, Solver
+    from lss_kernels import Params, Solver
     scene = make_scene("easy", seed=1, texture_bg={"kind": "stripes", "period": 6.0})
     with pytest.warns(UnreliableStartWarning, match=r"^init auto: the left image is "
                       r"periodic \(\d+% of its tiles\).*start from a point, a box or an "
@@ -293,7 +293,7 @@ def test_auto_on_a_striped_background_warns_that_its_start_may_be_wrong(fresh_ta
 @pytest.fixture(scope="module")
 def slanted(ti_arch):
     from lss_kernels.scenes import make_scene
-    from lss_kernels.solver import Params, Solver
+    from lss_kernels import Params, Solver
     backend.restart()   # after the tests of `easy`
     scene = make_scene("slanted", seed=2)
     solver = Solver(scene.left, scene.right, scene.d_max, "auto",

@@ -96,7 +96,7 @@ def test_a_box_whose_centre_region_covers_too_little_of_it_starts_from_its_ellip
 
 def test_a_box_on_a_periodic_image_starts_from_its_ellipse(region):
     from lss_kernels.model.init import box_ellipse
-    from lss_kernels.periodicity import PERIODIC_AREA, periodic_share
+    from lss_kernels.checks.periodicity import PERIODIC_AREA, periodic_share
     _block_scene(region)
     x = np.arange(160)
     stripes = np.tile((128 + 100 * np.sin(2 * np.pi * x / 8))[None, :, None], (32, 1, 3))

@@ -31,8 +31,7 @@ def _imports(path):
 
 #: The checks around a solve (input validation, periodicity, photometry, direction and range,
 #: collapse and retry): a layer that wraps the model, which never reaches up into it.
-CHECKS = {"lss_kernels.recovery", "lss_kernels.validate", "lss_kernels.direction",
-          "lss_kernels.photometry", "lss_kernels.periodicity"}
+CHECKS = "lss_kernels.checks"
 
 
 def _below(path, folder):
@@ -46,11 +45,11 @@ def test_imports_follow_the_layers(path):
     if _below(path, "kernels"):
         forbidden = {"lss_kernels.model", "lss_kernels.apps", "lss_kernels.reference",
                      "lss_kernels.io", "lss_kernels.viz", "lss_kernels.metrics",
-                     "lss_kernels.scenes", "lss_kernels.solver", "lss_kernels.params"}
+                     "lss_kernels.scenes", "lss_kernels.solver", "lss_kernels.params", CHECKS}
     elif _below(path, "model"):
         forbidden = {"lss_kernels.apps", "lss_kernels.reference", "lss_kernels.io",
                      "lss_kernels.viz", "lss_kernels.metrics", "lss_kernels.scenes",
-                     "lss_kernels.solver"} | CHECKS
+                     "lss_kernels.solver", CHECKS}
     elif not _below(path, "apps"):
         forbidden = {"lss_kernels.apps"}
     bad = sorted(i for i in imports if any(i == f or i.startswith(f + ".") for f in forbidden))
@@ -81,9 +80,22 @@ def test_the_model_imports_no_check_and_no_app():
     for path in MODULES:
         if _below(path, "model"):
             module = ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts)
-            bad = sorted(m for m in reach(module, set()) if m in CHECKS
-                         or m == "lss_kernels.apps" or m.startswith("lss_kernels.apps."))
+            bad = sorted(m for m in reach(module, set()) if any(
+                m == layer or m.startswith(layer + ".")
+                for layer in (CHECKS, "lss_kernels.apps")))
             assert not bad, f"{path.relative_to(PACKAGE)} reaches {bad}"
+
+
+def test_the_checks_are_one_subpackage_around_the_solver():
+    """The checks live in checks/ only, and the solver takes from them no more than the
+    checked pair and the checks of its own arguments and memory: direction, photometry,
+    periodicity and recovery are the layer's, which :func:`lss_kernels.solve` wraps around
+    it."""
+    for name in ("validate", "periodicity", "photometry", "direction", "recovery"):
+        assert not (PACKAGE / f"{name}.py").exists(), f"{name}.py outside checks/"
+    taken = {i for i in _imports(PACKAGE / "solver.py") if i.startswith(CHECKS + ".")}
+    assert {i.rsplit(".", 1)[0] if i.count(".") > 2 else i for i in taken} <= {
+        "lss_kernels.checks.pair", "lss_kernels.checks.validate"}
 
 
 def test_no_import_cycle():

@@ -1,10 +1,10 @@
-"""The right view's photometric correction (lss_kernels.photometry): the model fitted at the
+"""The right view's photometric correction (lss_kernels.checks.photometry): the model fitted at the
 matches against rendered pairs with a known gain, vignetting and offset; the pairs it must
 leave alone; the solver's use of it."""
 import numpy as np
 import pytest
 
-from lss_kernels.photometry import MIN_DIFFERENCE, _radius2, equalise, fit
+from lss_kernels.checks.photometry import MIN_DIFFERENCE, _radius2, equalise, fit
 from lss_kernels.scenes import make_scene
 
 

@@ -19,7 +19,7 @@ from lss_kernels.apps.cli import main
 from lss_kernels.io import read_image, read_pfm, write_pfm
 from lss_kernels.metrics import score_arrays
 from lss_kernels.scenes import make_scene
-from lss_kernels.validate import MIN_RADIUS, check_init, parse_init
+from lss_kernels.checks.validate import MIN_RADIUS, check_init, parse_init
 
 H, W = 48, 64
 D_MAX = 14.0          # the tiny preset's d_max: one c_max for every solver run here

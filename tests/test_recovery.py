@@ -6,8 +6,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lss_kernels import Params, periodicity, recovery
-from lss_kernels.recovery import collapse, model_health, with_recovery
+from lss_kernels import Params
+from lss_kernels.checks import periodicity, recovery
+from lss_kernels.checks.pair import CheckedPair
+from lss_kernels.checks.recovery import collapse, model_health, with_recovery
 
 H, W = 20, 30
 D_MAX = 64.0
@@ -172,6 +174,11 @@ def test_no_second_solve_without_need_or_leave(params, first_jump):
                for m in said)
 
 
+def checked(left):
+    """``left`` twice, as :func:`lss_kernels.solve` checks a pair (started automatically)."""
+    return CheckedPair(left, left, D_MAX, "auto", "left", Params())
+
+
 def stripes(period, shape=(64, 160), phase=0.0):
     """Vertical sinusoidal stripes of ``period`` pixels, grey in [0, 1]."""
     x = np.arange(shape[1])
@@ -240,7 +247,7 @@ def test_the_periodic_share_is_the_fraction_from_periodic_area_on_and_zero_below
 
 def test_a_periodic_pair_is_solved_with_the_recovery_unrefined_first_and_the_defaults_second():
     run, calls = runs(model(jump=0.0), model(jump=12.0))
-    result, _ = with_recovery(run, Params(), D_MAX, left=stripes(6))
+    result, _ = with_recovery(run, Params(), D_MAX, checked(stripes(6)))
     periodic = Params().replace(**recovery.RECOVERY, refine=False)
     assert calls == [periodic, Params()] and recovery.PERIODIC["refine"] is False
     assert result.recovery["periodic"] == 1.0
@@ -253,11 +260,11 @@ def test_a_periodic_pair_is_solved_with_the_recovery_unrefined_first_and_the_def
 def test_a_textured_pair_starts_with_the_given_params_and_records_its_periodicity():
     run, calls = runs(model(jump=10.0))
     rng = np.random.default_rng(1)
-    result, _ = with_recovery(run, Params(), D_MAX, left=rng.random((64, 160, 3)))
+    result, _ = with_recovery(run, Params(), D_MAX, checked(rng.random((64, 160, 3))))
     assert calls == [Params()] and result.recovery["periodic"] == 0.0
     assert "first_params" not in result.recovery
     run, calls = runs(model(jump=10.0))
-    with_recovery(run, Params(recover=False), D_MAX, left=stripes(6))
+    with_recovery(run, Params(recover=False), D_MAX, checked(stripes(6)))
     assert calls == [Params(recover=False)]
 
 
@@ -330,7 +337,7 @@ def test_a_periodic_start_that_finds_nothing_falls_back_to_the_given_params():
         if params.message_ambiguity > 0:
             raise InitError("init: no confident match near the point")
         return model(jump=0.0), len(calls)
-    result, extra = with_recovery(run, Params(), D_MAX, left=stripes(6))
+    result, extra = with_recovery(run, Params(), D_MAX, checked(stripes(6)))
     assert calls == [Params().replace(**recovery.PERIODIC), Params()]
     assert "no confident match" in result.recovery["first_error"]
     assert result.recovery["retried"] is False and extra == 2
@@ -342,4 +349,5 @@ def test_an_init_error_without_a_periodic_switch_is_raised():
     def run(params):
         raise InitError("init auto: no foreground found")
     with pytest.raises(InitError, match="no foreground found"):
-        with_recovery(run, Params(), D_MAX, left=np.random.default_rng(2).random((64, 160)))
+        with_recovery(run, Params(), D_MAX,
+                      checked(np.random.default_rng(2).random((64, 160))))

@@ -247,7 +247,7 @@ def test_a_striped_pair_that_looks_sound_under_ad_is_found_by_the_periodicity_ch
     sound (a jump, in front, in range) but lies periods off (F1 0.12); the left image's
     periodicity sends it to the distinctness-weighted solve first (F1 1.00)."""
     from lss_kernels import solve
-    from lss_kernels.recovery import PERIODIC
+    from lss_kernels.checks.recovery import PERIODIC
     name, keywords = next(s for s in stress.stress_specs(seed=1, size="medium")
                           if s[0] == "periodic_both_p5_p8")
     keywords.pop("meta")

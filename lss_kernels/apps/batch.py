@@ -263,7 +263,7 @@ def _replace_folder(new: Path, final: Path, trash: Path) -> None:
 
 def _solve_pair(pair: Pair, out: str, params, arch: str, threads_by_host: dict) -> dict:
     """Solve ``pair`` into ``out/<name>`` through a partial folder; returns its summary."""
-    from ..recovery import named_warnings
+    from ..checks.recovery import named_warnings
     from .jobs import run_job
     cache = _worker_cache(arch, threads_here(threads_by_host))
     partial = Path(tempfile.mkdtemp(prefix=f".{pair.name}{PARTIAL}", dir=out))

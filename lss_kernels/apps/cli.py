@@ -161,7 +161,7 @@ def _params(args):
 
 def _inputs(args):
     """(left, right, d_max, init, init_frame, scene) from the solve/demo arguments."""
-    from ..validate import parse_init
+    from ..checks.validate import parse_init
     from .jobs import scene_init
     if sum(map(bool, (args.scene, args.images, args.preset))) > 1:
         raise CliError("give one of --scene DIR, --preset NAME or LEFT RIGHT")
@@ -183,9 +183,9 @@ def _inputs(args):
 
 def _range_hint(left, right):
     """What the error for a missing ``--dmax`` suggests: the pair's estimated range
-    (:func:`lss_kernels.direction.estimate_range`), or nothing when it cannot be had."""
-    from ..direction import estimate_range
-    from ..validate import check_pair
+    (:func:`lss_kernels.checks.direction.estimate_range`), or nothing when it cannot be had."""
+    from ..checks.direction import estimate_range
+    from ..checks.validate import check_pair
     try:
         facts = estimate_range(*check_pair(left, right))
     except ValueError:
@@ -298,7 +298,7 @@ def main(argv=None):
         parser.print_help()
         return 2
     try:
-        from ..recovery import WARNINGS
+        from ..checks.recovery import WARNINGS
         with warnings.catch_warnings():
             # warnings as one line each; the library's own every time (each pair of a batch)
             for category in WARNINGS:

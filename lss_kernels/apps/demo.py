@@ -45,10 +45,10 @@ DEFAULT_PRESET = "easy"
 
 def parse_init(text: str, shape=None):
     """Parse ``--init`` (``auto``, ``point:X,Y``, ``box:X0,Y0,X1,Y1``, ``ellipse:CX,CY,RX,RY``
-    or a mask PNG; none = ``auto``) with :func:`lss_kernels.validate.parse_init` and, given
+    or a mask PNG; none = ``auto``) with :func:`lss_kernels.checks.validate.parse_init` and, given
     the image ``shape``, check it against the image with
-    :func:`lss_kernels.validate.check_init`."""
-    from ..validate import check_init, parse_init as parse
+    :func:`lss_kernels.checks.validate.check_init`."""
+    from ..checks.validate import check_init, parse_init as parse
     init = "auto" if text is None else parse(text)
     return check_init(init, shape) if shape is not None else init
 

@@ -93,22 +93,22 @@ def scene_start(scene: io.Scene, init=None):
     return scene_init(scene, init)
 
 
-def _solve(scene: io.Scene, params, trace: bool = False, init=None):
-    """Solve a scene with this process's solver (a new one, after the last is closed, finds
-    the kernels compiled for its size: :func:`lss_kernels.kernels.backend.fresh_numbering`);
-    with ``trace``, also score the left view at the end of every stop window and at the last
-    iteration.  Returns the result, the trace rows and the seconds spent scoring them."""
+def _solve(scene: io.Scene, pair, params, trace: bool = False):
+    """Solve a scene's :class:`~lss_kernels.checks.pair.CheckedPair` with this process's
+    solver (a new one, after the last is closed, finds the kernels compiled for its size:
+    :func:`lss_kernels.kernels.backend.fresh_numbering`); with ``trace``, also score the
+    left view at the end of every stop window and at the last iteration.  Returns the
+    result, the trace rows and the seconds spent scoring them."""
     from ..solver import Solver
-    init, frame = scene_start(scene, init)
-    key = (scene.left.shape[:2], c_max(scene.d_max), params)
+    key = (pair.left.shape[:2], c_max(pair.d_max), params)
+    args = (pair, pair.right, pair.d_max, pair.init)
     solver = _SOLVER.get(key)
     if solver is None:
         _release_solver()
-        solver = Solver(scene.left, scene.right, scene.d_max, init, params=params,
-                        init_frame=frame)
+        solver = Solver(*args, params=params, init_frame=pair.init_frame)
         _SOLVER[key] = solver
     else:
-        solver.reset(scene.left, scene.right, scene.d_max, init, init_frame=frame)
+        solver.reset(*args, init_frame=pair.init_frame)
     rows, spent = [], [0.0]
     masks = metrics.evaluation_masks(scene) if trace else None
     window_end = StopRule(solver.params).is_window_end
@@ -150,16 +150,18 @@ def _run_method(method: str, scene: io.Scene, params, trace: bool = False, init=
     seconds spent on the trace."""
     if method == "lss":
         from ..start_types import InitError
-        from ..recovery import named_warnings, with_recovery
+        from ..checks.pair import CheckedPair
+        from ..checks.recovery import named_warnings, with_recovery
         from .jobs import sweep_summary
+        start, frame = scene_start(scene, init)
+        pair = CheckedPair(scene.left, scene.right, scene.d_max, start, frame, params)
 
         def run(p):
-            result, rows, spent = _solve(scene, p, trace, init)
+            result, rows, spent = _solve(scene, pair, p, trace)
             return result, (rows, spent)
         try:
             with named_warnings(scene.name):
-                result, (rows, spent) = with_recovery(run, params, scene.d_max, scene.left,
-                                                      scene.right)
+                result, (rows, spent) = with_recovery(run, params, pair.d_max, pair)
         except InitError as error:
             # no start found (auto, a point): the scene scores as no answer, the run goes on
             unknown = np.full(scene.left.shape[:2], np.inf, np.float32)
@@ -190,7 +192,7 @@ def _run_photo(scene: io.Scene, params, init=None):
     """``lss-photo``: the scene as a whole photo (:func:`lss_kernels.photo.solve_photo`)
     from its start in the left view."""
     from ..photo import solve_photo
-    from ..recovery import named_warnings
+    from ..checks.recovery import named_warnings
     _release_solver()
     start, frame = scene_start(scene, init)
     if frame == "cyclopean":

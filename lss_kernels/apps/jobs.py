@@ -111,24 +111,26 @@ class SolverCache:
         self.key, self.solver = None, None
 
     def solve(self, job, params, callback=None):
-        """Solve ``job`` (solved again when the model collapses, :mod:`lss_kernels.recovery`;
+        """Solve ``job`` (solved again when the model collapses, :mod:`lss_kernels.checks.recovery`;
         in windows of a whole photo, :mod:`lss_kernels.photo`, for ``job.photo``); returns
         ``(result, facts)``: the left image, the initial foreground (left view) and the
         initialisation's report of the run kept."""
-        from ..recovery import with_recovery
+        from ..checks.pair import CheckedPair
+        from ..checks.recovery import with_recovery
         if job.photo:
             return self._solve_photo(job, params, callback)
+        pair = CheckedPair(job.left, job.right, job.d_max, job.init, job.init_frame, params)
 
         def run(p):
-            result, solver = self._run(job, p, callback)
+            result, solver = self._run(pair, p, callback)
             return result, (solver.left_image, solver.initial_left,
                             solver.init_info)
-        return with_recovery(run, params, job.d_max, job.left, job.right)
+        return with_recovery(run, params, pair.d_max, pair)
 
     def _solve_photo(self, job, params, callback):
         from dataclasses import replace
         from ..photo import solve_in_windows
-        from ..validate import check_inputs
+        from ..checks.validate import check_inputs
         if job.init_frame != "left":
             raise ValueError("init: a whole photo's start is given in the left view")
         left, right, d_max, init = check_inputs(job.left, job.right, job.d_max, job.init,
@@ -139,20 +141,18 @@ class SolverCache:
                               callback)
         return solve_in_windows(run, left, right, d_max, init)
 
-    def _run(self, job, params, callback=None):
-        """Solve ``job`` with a reused or new solver; returns ``(result, solver)``."""
+    def _run(self, pair, params, callback=None):
+        """Solve a :class:`~lss_kernels.checks.pair.CheckedPair` with a reused or new
+        solver; returns ``(result, solver)``."""
         from ..params import c_max
         from ..solver import Solver
-        from ..validate import check_inputs
-        left, right, d_max, init = check_inputs(job.left, job.right, job.d_max, job.init,
-                                                job.init_frame, params)
-        key = (left.shape[:2], c_max(d_max), params)
+        key = (pair.left.shape[:2], c_max(pair.d_max), params)
+        args = (pair, pair.right, pair.d_max, pair.init)
         if key == self.key:
-            self.solver.reset(left, right, d_max, init, init_frame=job.init_frame)
+            self.solver.reset(*args, init_frame=pair.init_frame)
         else:
             self.close()
-            self.solver = Solver(left, right, d_max, init, params=params,
-                                 init_frame=job.init_frame)
+            self.solver = Solver(*args, params=params, init_frame=pair.init_frame)
             self.key = key
         return self.solver.run(callback), self.solver
 

@@ -37,7 +37,7 @@ Neither change is the default: each costs occlusion F1 on the paper's scenes.
 
 A periodic texture does not always collapse the model: the stripes can be explained by a
 sound-looking model at the wrong disparity, whose boundary wanders over the background.  So
-the left image is examined first (:mod:`lss_kernels.periodicity`).  When at least
+the left image is examined first (:mod:`lss_kernels.checks.periodicity`).  When at least
 ``PERIODIC_AREA`` of its tiles are periodic, the first solve
 uses ``PERIODIC`` -- ``RECOVERY`` without the refinement, whose residuals need distinct
 matches (on stripes they lie whole periods off) -- and the retry, if its model collapses,
@@ -48,8 +48,8 @@ import warnings
 
 import numpy as np
 
-from .periodicity import PERIODIC_AREA, periodic_fraction
-from .start_types import InitError
+from ..start_types import InitError, UnreliableStartWarning
+from .periodicity import PERIODIC_AREA
 
 __all__ = ["CollapsedModelWarning", "MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE",
            "MIN_JUMP", "PERIODIC", "RECOVERY", "ShortRangeWarning", "SwappedViewsWarning",
@@ -133,12 +133,6 @@ class ShortRangeWarning(UserWarning):
     """Many of the pair's matches lie beyond the searched range: ``d_max`` is too small."""
 
 
-class UnreliableStartWarning(UserWarning):
-    """``init="auto"`` found its start on a periodic left image, whose first consensus the
-    stripes make ambiguous: the start, and so the answer, may be the wrong region
-    (:mod:`lss_kernels.model.init`)."""
-
-
 class CollapsedModelWarning(UserWarning):
     """The model returned collapsed (:func:`collapse`), and no other solve gave a sound one:
     the output is no two-layer reading of the pair."""
@@ -188,19 +182,11 @@ def named_warnings(name: str):
                 warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
 
-def _check_matches(left, right, d_max) -> tuple:
-    """:func:`~lss_kernels.direction.match_direction` and, unless swapped,
-    :func:`~lss_kernels.direction.match_range` of the pair (``left`` already read); warns
-    when swapped or when the range looks too short.  An invalid pair or range is left to the
-    solver's own checks (no verdict: ``({}, {})``)."""
-    from .direction import match_direction, match_range
-    from .validate import check_pair, check_range
-    try:
-        left, right = check_pair(left, right)
-        check_range(d_max, left.shape[1])
-    except ValueError:
-        return {}, {}
-    direction = match_direction(left, right, d_max)
+def _check_matches(pair) -> tuple:
+    """The pair's :attr:`~.pair.CheckedPair.direction` and, unless swapped, its
+    :attr:`~.pair.CheckedPair.range`; warns when swapped or when the range looks too
+    short."""
+    direction = pair.direction
     if direction["swapped"]:
         warnings.warn(SwappedViewsWarning(
             f"the views look swapped: the right image matches the left one at x + d on "
@@ -208,38 +194,36 @@ def _check_matches(left, right, d_max) -> tuple:
             f"{direction['stated']:.0%}; the left image must be the reference (x_right = "
             f"x_left - d, d >= 0): pass the two images the other way round"), stacklevel=3)
         return direction, {}
-    reach = match_range(left, right, d_max)
+    reach = pair.range
     if reach["short"]:
         warnings.warn(ShortRangeWarning(
             f"the search range looks too short: {reach['beyond']:.0%} of the textured pixels "
-            f"match better at a disparity between d_max = {float(d_max):g} and twice it than "
+            f"match better at a disparity between d_max = {pair.d_max:g} and twice it than "
             f"within [0, d_max]; give a larger d_max (--dmax)"), stacklevel=3)
     return direction, reach
 
 
-def with_recovery(run, params, d_max, left=None, right=None):
+def with_recovery(run, params, d_max, pair=None):
     """``run(params) -> (result, extra)`` once, and again when the model collapsed (and
     ``params.recover``); returns the ``(result, extra)`` kept, with ``result.recovery`` set.
 
     The first solve uses ``params`` and the second ``params`` changed by ``RECOVERY``; when
-    ``left`` (the left image, anything :func:`lss_kernels.io.read_image` reads) is
+    the left image of ``pair`` (a :class:`~lss_kernels.checks.pair.CheckedPair`) is
     periodic over at least ``PERIODIC_AREA`` of its tiles, the first uses ``params``
     changed by ``PERIODIC`` and the second ``params`` (at once, without a retry, when the
     first finds no initial region: :class:`~lss_kernels.start_types.InitError`).  ``params``
-    None: the defaults; ``d_max``: the searched range (left-view pixels).  With ``left``
-    and ``right``, the pair is first checked for swapped views and a search range that
-    is too short (:mod:`lss_kernels.direction`, recorded as ``direction`` and ``range``): a
+    None: the defaults; ``d_max``: the searched range (left-view pixels).  With ``pair``,
+    it is first checked for swapped views and a search range that is too short
+    (:mod:`lss_kernels.checks.direction`, recorded as ``direction`` and ``range``): a
     :class:`SwappedViewsWarning` or a :class:`ShortRangeWarning` says so before the solve."""
-    from .params import Params
+    from ..params import Params
     params = Params() if params is None else params
-    from .io import read_image
     record = {}
-    left = read_image(left, name="left") if left is not None else None
-    if left is not None and right is not None:
-        record["direction"], record["range"] = _check_matches(left, right, d_max)
+    if pair is not None:
+        record["direction"], record["range"] = _check_matches(pair)
     first_params, second_params = params, params.replace(**RECOVERY)
-    if params.recover and left is not None and second_params != params:
-        fraction = periodic_fraction(left)
+    if params.recover and pair is not None and second_params != params:
+        fraction = pair.periodic
         record["periodic"] = fraction
         if fraction >= PERIODIC_AREA:
             first_params, second_params = params.replace(**PERIODIC), params

@@ -32,7 +32,7 @@ import numpy as np
 from .direction import (MIN_TEXTURED, WINDOW, box_sums, grey_copies, textured_windows,
                         window_detail)
 
-__all__ = ["EXPLAINED", "MIN_DIFFERENCE", "equalise", "fit"]
+__all__ = ["EXPLAINED", "MIN_DIFFERENCE", "corrected", "equalise", "fit"]
 
 MIN_DIFFERENCE = 0.02   # views differing less than this at their matches are left alone
 EXPLAINED = 0.3         # ... and those whose model leaves more than this share of it
@@ -50,7 +50,8 @@ def _radius2(x, y, W, H):
 def fit(left, right, d_max) -> dict:
     """The photometric model of the right view on the left one at their matches.
 
-    ``left``, ``right``: float images in [0, 1] of one shape; ``d_max``: the searched
+    ``left``, ``right``: float images in [0, 1] of one shape (colour or grey, compared as
+    grey, :func:`~lss_kernels.checks.validate.luma`); ``d_max``: the searched
     range, left-view pixels.  Returns ``gain``, ``vignetting`` (``g_2``), ``offset``,
     ``difference`` and ``residual`` (median absolute difference of the 5x5 means at the
     matches, before and after the model), ``matches`` and ``correct`` (bool), with ``why``
@@ -104,11 +105,16 @@ def equalise(left, right, d_max):
     """``(right, facts)``: the right image corrected to the left one's photometry where
     :func:`fit` says so (else ``right`` itself), and :func:`fit`'s facts."""
     facts = fit(left, right, d_max)
+    return corrected(right, facts), facts
+
+
+def corrected(right, facts):
+    """``right`` corrected by :func:`fit`'s model where ``facts["correct"]``, else itself."""
     if not facts["correct"]:
-        return right, facts
+        return right
     H, W = right.shape[:2]
     y, x = np.mgrid[0:H, 0:W]
     gain = facts["gain"] + facts["vignetting"] * _radius2(x, y, W, H)
     gain = gain[..., None] if np.ndim(right) == 3 else gain
     out = (np.asarray(right, np.float64) - facts["offset"]) / gain
-    return np.clip(out, 0.0, 1.0).astype(np.float32), facts
+    return np.clip(out, 0.0, 1.0).astype(np.float32)

@@ -5,8 +5,8 @@ The model reads the pair in the Middlebury convention: the left image is the ref
 left pixel ``x`` matches the right pixel ``x - d`` with ``d >= 0``.  Passed the other way
 round (the right image first), every match runs the other way, the searched range holds no
 true match, and the model explains nothing (on the tiny scene the foreground vanishes after
-18 iterations, and the retry of :mod:`lss_kernels.recovery` collapses too).  Nothing in the
-output says why, so the pair is examined first.
+18 iterations, and the retry of :mod:`lss_kernels.checks.recovery` collapses too).  Nothing
+in the output says why, so the pair is examined first.
 
 On a grey copy of the pair, block-averaged to at most ``MAX_WIDTH`` columns, each pixel's
 best sum of absolute differences over a ``WINDOW`` square is found along the row for the
@@ -46,6 +46,8 @@ import math
 
 import numpy as np
 
+from .validate import luma
+
 __all__ = ["MARGIN", "RANGE_FLOOR", "RANGE_GAP", "RANGE_SHARE", "SHORT_SHARE", "SWAPPED_RATIO",
            "SWAPPED_SHARE", "box_sums", "estimate_range", "grey_copies", "match_direction",
            "match_range", "textured_windows", "window_detail"]
@@ -71,14 +73,14 @@ def box_sums(a, k):
 
 
 def _grey(image, f):
-    g = np.asarray(image, np.float32)
-    g = g.mean(axis=2) if g.ndim == 3 else g
+    g = luma(image)
     H, W = (g.shape[0] // f) * f, (g.shape[1] // f) * f
     return g[:H, :W].reshape(H // f, f, W // f, f).mean(axis=(1, 3))
 
 
 def grey_copies(left, right):
-    """The check's scale (block size) and the pair's grey copies at it."""
+    """The check's scale (block size) and the pair's grey copies (:func:`~lss_kernels.checks.
+    validate.luma`; ``(H, W)`` images as they are) at it."""
     f = max(1, math.ceil(np.shape(left)[1] / MAX_WIDTH))
     return f, _grey(left, f), _grey(right, f)
 
@@ -215,7 +217,7 @@ def estimate_range(left, right) -> dict:
         farthest = float((last[0] + above[-1] if above.size else last[-1]) * f)
     else:
         farthest = float(np.argmax(hist) * f)
-    # a multiple of 8 from 16, below the image's width (what lss_kernels.validate accepts)
+    # a multiple of 8 from 16, below the image's width (what lss_kernels.checks.validate accepts)
     d_max = min(max(16, 8 * math.ceil((1.15 * farthest + 8) / 8)),
                 max(1, 8 * ((W * f - 1) // 8)))
     return {"d_max": d_max, "farthest": farthest, "matches": int(found.size), "scale": f}

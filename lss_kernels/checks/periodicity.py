@@ -7,17 +7,17 @@ grey-level gradient along the rows, at lags 1 to ``MAX_PERIOD`` pixels, is compu
 is periodic when the correlation, after falling, rises back to a peak ``2 PERIODIC_SCORE``
 above its lowest value at a smaller lag (stripes: from -1 at half the period to +1 at the
 period, a rise of 2; real texture decorrelates and stays near 0).  An image with at least
-``PERIODIC_AREA`` of its tiles periodic counts as periodic: :mod:`lss_kernels.recovery`
+``PERIODIC_AREA`` of its tiles periodic counts as periodic: :mod:`lss_kernels.checks.recovery`
 solves it with distinctness-weighted messages first, and a start found from the first
 consensus (a box, ``auto``) does not trust that consensus
 (:meth:`~lss_kernels.model.init.InitialRegion.find`).
 """
 import numpy as np
 
-from .validate import LUMA
+from .validate import luma
 
 __all__ = ["MAX_PERIOD", "PERIODIC_AREA", "PERIODIC_SCORE", "TILE", "periodic_fraction",
-           "periodic_share", "periodicity"]
+           "periodic_share", "periodic_tiles", "periodicity"]
 
 #: Rows and columns of the tiles in which periodicity is measured.
 TILE = (16, 64)
@@ -36,9 +36,7 @@ def periodicity(image) -> np.ndarray:
     ``2 .. MAX_PERIOD - 1``; 0 for flat tiles and where no peak follows a dip.  ``image``:
     ``(H, W)`` grey or ``(H, W, 3)`` RGB.  Tiles cover the image from the top left; the
     last ``MAX_PERIOD`` columns only serve as shifted copies.  Returns ``(rows, cols)``."""
-    image = np.asarray(image, np.float64)
-    grey = image[..., :3] @ LUMA if image.ndim == 3 else image
-    gx = np.diff(grey, axis=1)
+    gx = np.diff(luma(image), axis=1)
     th, tw = TILE
     rows, cols = gx.shape[0] // th, (gx.shape[1] - MAX_PERIOD) // tw
     if rows <= 0 or cols <= 0:
@@ -62,11 +60,15 @@ def periodicity(image) -> np.ndarray:
     return np.where(energy > 1e-6 * th * tw, score, 0.0)
 
 
-def periodic_fraction(image) -> float:
-    """The fraction of :func:`periodicity`'s tiles that score above ``PERIODIC_SCORE``
+def periodic_tiles(score) -> float:
+    """The fraction of the tiles of a :func:`periodicity` ``score`` above ``PERIODIC_SCORE``
     (0 for an image too small for one tile)."""
-    score = periodicity(image)
     return float((score > PERIODIC_SCORE).mean()) if score.size else 0.0
+
+
+def periodic_fraction(image) -> float:
+    """:func:`periodic_tiles` of ``image``'s :func:`periodicity`."""
+    return periodic_tiles(periodicity(image))
 
 
 def periodic_share(image) -> float:

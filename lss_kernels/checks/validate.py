@@ -6,10 +6,10 @@ import os
 
 import numpy as np
 
-from .start_types import AUTO, Box, Point
+from ..start_types import AUTO, Box, Point
 
-__all__ = ["available_memory", "check_init", "check_inputs", "check_memory", "check_pair",
-           "check_range", "fields_bytes", "parse_init"]
+__all__ = ["LUMA", "available_memory", "check_init", "check_inputs", "check_memory",
+           "check_pair", "check_params", "check_range", "fields_bytes", "luma", "parse_init"]
 
 #: The smallest radius of an initial ellipse, pixels: one with a radius below it covers at
 #: most one pixel along that axis, no region to start from (a start's 7x7 median erases it).
@@ -19,6 +19,17 @@ KINDS = "expected an ellipse (cx, cy, rx, ry), a boolean mask, 'auto', a Point o
 
 def _largest_patch(params):
     return max(params.patch_sizes)
+
+
+def check_params(params):
+    """``params`` itself, or the defaults for None; a ``TypeError`` for anything but a
+    :class:`~lss_kernels.Params`."""
+    from ..params import Params
+    if params is None:
+        return Params()
+    if not isinstance(params, Params):
+        raise TypeError(f"params: expected lss_kernels.Params, got {type(params).__name__}")
+    return params
 
 
 def check_inputs(left, right, d_max, init, init_frame, params):
@@ -41,6 +52,14 @@ def check_inputs(left, right, d_max, init, init_frame, params):
 LUMA = np.array([0.299, 0.587, 0.114])
 
 
+def luma(image) -> np.ndarray:
+    """The grey image (Rec. 601 luma, float64) of an ``(H, W, C)`` RGB(A) image; an ``(H, W)``
+    image as float64 itself.  The one grey of the checks (the kernels' census and Sobel
+    compute the same weights on the device)."""
+    image = np.asarray(image, np.float64)
+    return image[..., :3] @ LUMA if image.ndim == 3 else image
+
+
 def _grey(image) -> bool:
     """Whether an ``(H, W, 3)`` image has three equal channels."""
     return bool((image[..., 0] == image[..., 1]).all() and (image[..., 1] == image[..., 2]).all())
@@ -50,7 +69,7 @@ def check_pair(left, right):
     """Both images read (:func:`lss_kernels.io.read_image`) and of one size.  When one view is
     grey and the other colour, the colour one is made grey too (Rec. 601 luma): a grey pixel
     compared with a colour one differs at the true match too."""
-    from .io import read_image
+    from ..io import read_image
     left = read_image(left, name="left")
     right = read_image(right, name="right")
     if left.shape != right.shape:
@@ -58,7 +77,7 @@ def check_pair(left, right):
                          f"got {right.shape[1]}x{right.shape[0]}")
     grey = _grey(left), _grey(right)
     if grey[0] != grey[1]:
-        as_grey = lambda img: np.repeat((img @ LUMA)[..., None], 3, axis=2).astype(np.float32)
+        as_grey = lambda img: np.repeat(luma(img)[..., None], 3, axis=2).astype(np.float32)
         left, right = (img if g else as_grey(img) for img, g in zip((left, right), grey))
     return left, right
 
@@ -76,8 +95,8 @@ def fields_bytes(height, width, d_max) -> int:
     ``d_max`` (the default parameters; under what they hold): per pixel of the size
     bucket, 640 bytes of planes and 16 bytes for each of the ``c_max`` candidates of the
     volumes (measured at 256x192: 728 + 17.0 c_max)."""
-    from .kernels.backend import bucket_shape
-    from .params import c_max
+    from ..kernels.backend import bucket_shape
+    from ..params import c_max
     bucket_h, bucket_w = bucket_shape(int(height), int(width))
     return bucket_h * bucket_w * (640 + 16 * c_max(d_max))
 
@@ -103,7 +122,7 @@ def check_memory(height, width, d_max):
     memory available is refused before any is allocated (instead of the process being
     killed part-way); a new :class:`~lss_kernels.Solver` asks, a reset one (its fields
     already allocated) does not."""
-    from .kernels.backend import current_arch
+    from ..kernels.backend import current_arch
     if current_arch() not in (None, "cpu"):
         return
     need, have = fields_bytes(height, width, d_max), available_memory()
@@ -240,7 +259,7 @@ def parse_init(text):
     if kind == "ellipse":
         return _numbers(text, rest, 4, "ellipse:CX,CY,RX,RY")
     if kind == "mask" or text.lower().endswith(".png"):
-        from .io import read_mask
+        from ..io import read_mask
         if kind == "mask" and not rest:
             raise ValueError(f"--init: expected mask:PATH with a path, got {text!r}")
         return read_mask(rest if kind == "mask" else text, name="--init")
