@@ -140,12 +140,12 @@ class Params:
         A model that collapsed (no foreground, no disparity jump, the foreground behind the
         background, or its surface outside ``[0, d_max]``) is solved again with the
         AD-Census cost and distinctness-weighted messages, and the second model kept when it
-        is sound (:mod:`lss_kernels.recovery`; :func:`~lss_kernels.solve`, ``lss solve``,
-        ``lss batch`` and ``lss eval``; a bare ``Solver.run`` does not).
+        is sound (:mod:`lss_kernels.checks.recovery`; :func:`~lss_kernels.solve`, ``lss
+        solve``, ``lss batch`` and ``lss eval``; a bare ``Solver.run`` does not).
     photometric : bool
         Correct the right view to the left one's photometry (a gain, a radial vignetting and
         an offset fitted at the pair's matches) before the costs, where the views differ and
-        that model explains the difference (:mod:`lss_kernels.photometry`).
+        that model explains the difference (:mod:`lss_kernels.checks.photometry`).
     background_sweep : float
         Margin of the background's plane sweep (:mod:`lss_kernels.model.sweep`): after the
         fit, in the first ``reinit_every`` iterations and at every re-initialisation,
@@ -216,6 +216,11 @@ class Params:
             if isinstance(value, bool) or not ok(value):
                 raise ValueError(f"params.{name}: expected {expected}, got {value!r}")
 
+        def switch(name):
+            value = getattr(self, name)
+            if not isinstance(value, bool):
+                raise ValueError(f"params.{name}: expected True or False, got {value!r}")
+
         finite = lambda v: isinstance(v, (int, float)) and math.isfinite(v)
         pos = lambda v: finite(v) and v > 0
         nonneg = lambda v: finite(v) and v >= 0
@@ -248,20 +253,9 @@ class Params:
         need("occ_threshold", pos, "a finite number > 0")
         need("mono_threshold", pos, "a finite number > 0")
         need("shape_weight_power", lambda v: v in (1, 2), "1 (the paper) or 2 (the release)")
-        if self.matching_cost not in ("ad", "ad_census"):
-            raise ValueError(f"params.matching_cost: expected 'ad' or 'ad_census', got "
-                             f"{self.matching_cost!r}")
-        if not isinstance(self.subpixel_messages, bool):
-            raise ValueError(f"params.subpixel_messages: expected True or False, got "
-                             f"{self.subpixel_messages!r}")
-        if not isinstance(self.zero_floor, bool):
-            raise ValueError(f"params.zero_floor: expected True or False, got "
-                             f"{self.zero_floor!r}")
-        if not isinstance(self.refine_ellipse, bool):
-            raise ValueError(f"params.refine_ellipse: expected True or False, got "
-                             f"{self.refine_ellipse!r}")
-        if not isinstance(self.refine, bool):
-            raise ValueError(f"params.refine: expected True or False, got {self.refine!r}")
+        need("matching_cost", lambda v: v in ("ad", "ad_census"), "'ad' or 'ad_census'")
+        for name in ("subpixel_messages", "zero_floor", "refine_ellipse", "refine"):
+            switch(name)
         need("refine_passes", lambda v: isinstance(v, tuple) and len(v) >= 1 and all(
             isinstance(p, tuple) and len(p) == 3 and all(
                 isinstance(k, int) and not isinstance(k, bool) and 1 <= k <= 64 for k in p)
@@ -276,11 +270,8 @@ class Params:
             "(0, 0) or (near, far), integers with 0 <= near, near + 2 <= far <= 64")
         need("message_ambiguity", lambda v: finite(v) and 0 <= v <= 1,
              "a number in [0, 1] (0: off)")
-        if not isinstance(self.recover, bool):
-            raise ValueError(f"params.recover: expected True or False, got {self.recover!r}")
-        if not isinstance(self.photometric, bool):
-            raise ValueError(f"params.photometric: expected True or False, got "
-                             f"{self.photometric!r}")
+        switch("recover")
+        switch("photometric")
         need("front_margin", nonneg, "a finite number of pixels >= 0 (0: two layers)")
 
     @classmethod
