@@ -17,7 +17,7 @@ from ..model import FIXED_POINT_STEPS
 
 __all__ = [
     "census", "matching_cost", "box_sum", "box_mean", "box_extreme", "patches_containing",
-    "patch_costs", "patch_messages", "distinctness", "consensus",
+    "patch_costs", "patch_messages", "second_best", "distinctness", "consensus",
     "median_filter", "convolve", "gaussian_derivatives", "curvature", "interp_row",
     "interp_volume", "shape_value", "basis", "fit_shape", "delta_theta", "boundary_weight",
     "levelset_step", "squared_distance", "reinitialise", "disparity", "near_pixels", "dilate",
@@ -131,6 +131,15 @@ def patch_messages(cost, d_mean, beta, subpixel=True):
     return d_p, sigma
 
 
+def second_best(cost, best, axis):
+    """The peak ratio's second candidate: along ``axis`` of ``cost``, the lowest cost at
+    least two candidates from the index ``best`` (``cost``'s shape without ``axis``); inf
+    where there is none."""
+    k = np.arange(cost.shape[axis]).reshape([-1] + [1] * (cost.ndim - 1 - axis % cost.ndim))
+    far = np.abs(k - np.expand_dims(best, axis)) >= 2
+    return np.where(far, cost, np.inf).min(axis=axis)
+
+
 def distinctness(cost, ambiguity):
     """The weight of a patch's message by the distinctness of its cost curve ``cost[..., k]``
     (:class:`lss_kernels.model.messages.Messages` with ``ambiguity > 0``):
@@ -138,11 +147,8 @@ def distinctness(cost, ambiguity):
     ``second`` the lowest cost at least two candidates from the (first) argmin; ``r = 1`` on
     a flat curve."""
     cost = np.asarray(cost, np.float64)
-    k = np.arange(cost.shape[-1])
-    best_k = cost.argmin(axis=-1)
     best = cost.min(axis=-1)
-    far = np.abs(k - best_k[..., None]) >= 2
-    second = np.where(far, cost, np.inf).min(axis=-1)
+    second = second_best(cost, cost.argmin(axis=-1), axis=-1)
     mean = cost.mean(axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
         r = np.where(mean > best, np.minimum((mean - np.minimum(second, mean)) / (mean - best),

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..model import FIXED_POINT_STEPS
 from ..model.occlusion import STRIP_EVIDENCE
-from .kernels import box_sum, census
+from .kernels import box_sum, census, second_best
 
 __all__ = ["left_cost", "refine_layers", "refine_with_evidence", "occluded_strips"]
 
@@ -70,8 +70,7 @@ def refine_with_evidence(left, right, surface, foreground, occlusion, d_max, pas
                     costs[np.where(ok, k, 0), np.arange(H)[:, None], np.arange(W)])
         kb = costs.argmin(axis=0)
         best = costs.min(axis=0)
-        ks = np.arange(2 * R + 1)[:, None, None]
-        second = np.where(np.abs(ks - kb) >= 2, costs, np.inf).min(axis=0)
+        second = second_best(costs, kb, axis=0)
         cm = np.take_along_axis(costs, np.clip(kb - 1, 0, 2 * R)[None], 0)[0]
         cp = np.take_along_axis(costs, np.clip(kb + 1, 0, 2 * R)[None], 0)[0]
         ok = ((kb > 0) & (kb < 2 * R) & visible & np.isfinite(best) & np.isfinite(cm)
