@@ -4,11 +4,12 @@
     lss eval SET --methods lss,sgm,bm-lr --out RESULTS
     python demos/stress_table.py RESULTS [RESULTS ...] > docs/stress.md
 
-Each ``RESULTS`` folder (an ``lss eval --out``) becomes one section, titled by the folder's
-name: the mean occlusion F1 and bad-4.0 of every method per family (the part of a scene's
-name before its first ``_``: ``periodic_fg_p3`` is of ``periodic``, ``random_07`` of
-``random``), then per scene.  Nothing is typed in by hand: rerun the evaluations and this
-script, and the page follows.
+Each ``RESULTS`` folder (an ``lss eval --out``) is titled by the folder's name.  Folders of the
+same scenes (two seeds of the stress set) share one section, each cell holding their numbers
+in the order given (``0.98 / 0.99``): the mean occlusion F1 and bad-4.0 of every method per
+family (the part of a scene's name before its first ``_``: ``periodic_fg_p3`` is of
+``periodic``, ``random_07`` of ``random``), then per scene.  Nothing is typed in by hand:
+rerun the evaluations and this script, and the page follows.
 """
 import argparse
 import csv
@@ -20,9 +21,8 @@ INTRO = """\
 # The stress set
 
 `python -m lss_kernels.stress DIR --seed S` renders hard two-layer scenes with exact ground
-truth (`lss_kernels.stress`: nine families of four, 320×240; `--random N` draws N scenes at
-random over the generator's dimensions instead; each scene's `meta.json` holds its `family`
-and a one-line `description`). The families:
+truth: nine families of four, 320×240 (`--random N`: N scenes drawn at random over the
+generator's dimensions; each scene's `meta.json` holds its `family` and `description`).
 
 | family | what it tests |
 |---|---|
@@ -36,10 +36,9 @@ and a one-line `description`). The families:
 | `fine` | small disparity jumps: occlusion strips 3–7 px wide |
 | `clutter` | boxes, a shelf, a floor behind the object that one quadratic cannot follow |
 
-Each section below is one `lss eval DIR --methods ... --out RESULTS` with the default
-parameters, on the CPU; this page is written by `python demos/stress_table.py RESULTS ... >
-docs/stress.md` from their `results.csv`. Scores follow `docs/scene-format.md`: occlusion
-F1 and bad-4.0 (%) in the evaluation band; "F1 < 0.5" counts lss's scenes below 0.5.
+Each section: `lss eval DIR --methods ... --out RESULTS` (default parameters, CPU), written
+by `python demos/stress_table.py RESULTS ... > docs/stress.md`; occlusion F1 and bad-4.0 (%)
+in the evaluation band (`docs/scene-format.md`).
 """
 
 
@@ -72,31 +71,44 @@ def number(value: float, digits: int) -> str:
     return "–" if math.isnan(value) else f"{value:.{digits}f}"
 
 
-def section(title: str, scores: dict) -> list:
-    """The markdown lines of one evaluation: per family, then per scene."""
-    methods = list(dict.fromkeys(m for by_method in scores.values() for m in by_method))
-    header = ([f"F1 {m}" for m in methods] + [f"bad-4.0 {m}" for m in methods])
+def section(titles: list, runs: list) -> list:
+    """The markdown lines of evaluations of the same scenes (``runs``, one ``{scene: {method:
+    scores}}`` each): per family, then per scene; a cell holds each run's number."""
+    scenes = list(runs[0])
+    methods = list(dict.fromkeys(m for by_method in runs[0].values() for m in by_method))
+    header = [f"F1 {m}" for m in methods] + [f"bad-4.0 {m}" for m in methods]
 
-    def cells(scenes):
-        f1 = [mean(scores[s][m][0] for s in scenes if m in scores[s]) for m in methods]
-        bad = [mean(scores[s][m][1] for s in scenes if m in scores[s]) for m in methods]
-        return [number(v, 2) for v in f1] + [number(v, 1) for v in bad]
+    def joined(values, digits):
+        return " / ".join(number(v, digits) for v in values)
 
-    families = list(dict.fromkeys(family(s) for s in scores))
-    lines = [f"## {title}", "", f"Per family (means over its scenes; {len(scores)} scenes):",
-             "", "| family | n | " + " | ".join(header) + " | lss F1 < 0.5 |",
-             "|---" * (len(header) + 3) + "|"]
-    groups = [(f, [s for s in scores if family(s) == f]) for f in families]
+    def cells(group):
+        f1 = [joined([mean(r[s][m][0] for s in group if m in r[s]) for r in runs], 2)
+              for m in methods]
+        bad = [joined([mean(r[s][m][1] for s in group if m in r[s]) for r in runs], 1)
+               for m in methods]
+        return f1 + bad
+
+    def low(group):
+        return " / ".join(str(sum(1 for s in group if "lss" in r[s] and r[s]["lss"][0] < 0.5))
+                          for r in runs)
+
+    lines = [f"## {', '.join(titles)}", ""]
+    if len(runs) > 1:
+        lines += [f"Each cell: {' / '.join(titles)}.", ""]
+    groups = [(f, [s for s in scenes if family(s) == f])
+              for f in dict.fromkeys(family(s) for s in scenes)]
     if len(groups) > 1:
-        groups.append((f"all {len(scores)}", list(scores)))
-    for name, scenes in groups:
-        low = sum(1 for s in scenes if "lss" in scores[s] and scores[s]["lss"][0] < 0.5)
-        lines.append(f"| {name} | {len(scenes)} | " + " | ".join(cells(scenes))
-                     + f" | {low} |")
-    lines += ["", "Per scene:", "", "| scene | " + " | ".join(header) + " |",
-              "|---" * (len(header) + 1) + "|"]
-    for scene in scores:
-        lines.append(f"| {scene} | " + " | ".join(cells([scene])) + " |")
+        groups.append((f"all {len(scenes)}", scenes))
+        lines += ["| family | n | " + " | ".join(header) + " | lss F1 < 0.5 |",
+                  "|---" * (len(header) + 3) + "|"]
+        lines += [f"| {name} | {len(group)} | " + " | ".join(cells(group)) + f" | {low(group)} |"
+                  for name, group in groups]
+        lines.append("")
+    lines += ["| scene | " + " | ".join(header) + " |", "|---" * (len(header) + 1) + "|"]
+    lines += [f"| {scene} | " + " | ".join(cells([scene])) + " |" for scene in scenes]
+    if len(groups) == 1:
+        lines.append(f"| mean of {len(scenes)} (lss F1 < 0.5: {low(scenes)}) | "
+                     + " | ".join(cells(scenes)) + " |")
     return lines + [""]
 
 
@@ -105,9 +117,15 @@ def main(argv=None) -> int:
     parser.add_argument("results", nargs="+", type=Path, metavar="RESULTS",
                         help="output folders of lss eval (each holds results.csv)")
     args = parser.parse_args(argv)
-    lines = [INTRO]
+    sections = {}                       # the runs of the same scenes, in the order given
     for folder in args.results:
-        lines += section(folder.resolve().name, read_results(folder))
+        scores = read_results(folder)
+        titles, runs = sections.setdefault(tuple(scores), ([], []))
+        titles.append(folder.resolve().name)
+        runs.append(scores)
+    lines = [INTRO]
+    for titles, runs in sections.values():
+        lines += section(titles, runs)
     sys.stdout.write("\n".join(lines))
     return 0
 

@@ -43,3 +43,19 @@ def test_families_are_the_means_of_their_scenes_and_the_mean_rows_are_left_out(t
 def test_a_folder_without_results_is_refused_by_name(tmp_path):
     with pytest.raises(SystemExit, match="RESULTS: expected a folder with results.csv"):
         _stress_table().main([str(tmp_path)])
+
+
+def test_runs_of_the_same_scenes_share_a_section_and_a_single_family_ends_with_its_mean(
+        tmp_path, capsys):
+    rows = [("periodic_fg_p3", "lss", 1.0, 0.0), ("weak_fg_grey", "lss", 0.4, 2.0)]
+    seed0 = _results(tmp_path / "seed0", rows)
+    seed1 = _results(tmp_path / "seed1", [(s, m, f1 / 2, bad + 1) for s, m, f1, bad in rows])
+    random = _results(tmp_path / "random", [("random_00", "lss", 0.9, 1.0),
+                                            ("random_01", "lss", 0.3, 5.0)])
+    assert _stress_table().main([str(seed0), str(random), str(seed1)]) == 0
+    page = capsys.readouterr().out
+    assert "## seed0, seed1" in page and "Each cell: seed0 / seed1." in page
+    assert "| periodic_fg_p3 | 1.00 / 0.50 | 0.0 / 1.0 |" in page
+    assert "| all 2 | 2 | 0.70 / 0.35 | 1.0 / 2.0 | 1 / 1 |" in page
+    assert page.index("## seed0, seed1") < page.index("## random")
+    assert "| mean of 2 (lss F1 < 0.5: 1) | 0.60 | 3.0 |" in page
