@@ -24,9 +24,15 @@ clicked object and its click (``init_point``), scored on the band around that ob
 (``docs/scene-format.md``).  Its geometry is written for the "photo" size (672x560, d_max
 128) and scaled to "medium" (336x280, d_max 64) and "small" (168x140, d_max 32).
 
+:func:`periodic_specs` is another separate set: twelve two-layer scenes where a whole period
+is a valid match for either layer (stripes of 3-32 px on both layers, of one period or two,
+vertical or at an angle, or on the object over a weak background), periods and angles drawn
+per seed.
+
 Command line::
 
-    python -m lss_kernels.stress OUT [--seed S] [--size small|medium|photo] [--random N | --multi]
+    python -m lss_kernels.stress OUT [--seed S] [--size small|medium|photo]
+        [--random N | --multi | --periodic]
 """
 from __future__ import annotations
 
@@ -39,7 +45,7 @@ import numpy as np
 from .scenes import OUTLINES, check_scene, disparity_coefficients, write_multi_scene, write_scene
 
 __all__ = ["MULTI_FAMILY", "MULTI_SIZES", "SIZES", "STRESS_FAMILIES", "multi_specs",
-           "random_specs", "stress_specs", "write_stress_set"]
+           "periodic_specs", "random_specs", "stress_specs", "write_stress_set"]
 
 #: What each family tests.
 STRESS_FAMILIES = {
@@ -92,6 +98,44 @@ def _periodic(rng) -> list:
          {"d_fg": {"d": 32, "slope": (-0.04, 0.0)}, "d_bg": 12,
           "texture_fg": _stripes(7, mix=0.15), "texture_bg": _stripes(7)}),
     ]
+
+
+def _periodic_hard(rng) -> list:
+    """The periodic set (:func:`periodic_specs`): stripes on both layers or on the object
+    over a weak background, periods and angles drawn per seed."""
+    period = lambda lo, hi: float(rng.uniform(lo, hi))
+    angle = float(rng.uniform(20.0, 40.0))
+    same = [period(3, 5), period(6, 10), period(12, 20), period(24, 32)]
+    weak = _weak(6, 0.45)
+    scenes = [(f"same_{name}", f"stripes of one period ({p:.1f} px) on both layers",
+               {"texture_fg": _stripes(p), "texture_bg": _stripes(p)})
+              for name, p in zip(("fine", "mid", "coarse", "wide"), same)]
+    p_fg, p_bg, p_fg2, p_bg2, p_angle = (period(4, 8), period(9, 16), period(16, 24),
+                                         period(25, 32), period(6, 12))
+    scenes += [
+        ("diff", f"stripes of {p_fg:.1f} px (fg) and {p_bg:.1f} px (bg)",
+         {"texture_fg": _stripes(p_fg), "texture_bg": _stripes(p_bg)}),
+        ("diff_wide", f"stripes of {p_fg2:.1f} px (fg) and {p_bg2:.1f} px (bg)",
+         {"texture_fg": _stripes(p_fg2), "texture_bg": _stripes(p_bg2)}),
+        ("angle_same", f"stripes of {p_angle:.1f} px at {angle:.0f} degrees on both layers",
+         {"texture_fg": _stripes(p_angle, angle=angle),
+          "texture_bg": _stripes(p_angle, angle=angle)}),
+        ("angle_cross", f"stripes of {p_angle:.1f} px at +-{angle:.0f} degrees (fg, bg)",
+         {"texture_fg": _stripes(p_angle, angle=angle),
+          "texture_bg": _stripes(p_angle, angle=-angle)}),
+        ("slanted_same", f"stripes of {same[1]:.1f} px on both layers, slanted fg and bg",
+         {"texture_fg": _stripes(same[1]), "texture_bg": _stripes(same[1]),
+          "d_fg": {"d": 30, "slope": (0.05, -0.02)}, "d_bg": {"d": 12, "slope": (-0.03, 0.02)}}),
+    ]
+    for name, p, a in (("fine", period(3, 6), 0.0), ("coarse", period(10, 20), 0.0),
+                       ("angle", p_angle, 45.0)):
+        scenes.append((f"fg_{name}_weak_bg", f"stripes of {p:.1f} px at {a:.0f} degrees on "
+                       f"the object over a weak background",
+                       {"texture_fg": _stripes(p, angle=a), "texture_bg": weak}))
+    for _, _, params in scenes:
+        params.setdefault("d_fg", float(rng.uniform(26, 36)))
+        params.setdefault("d_bg", float(rng.uniform(8, 14)))
+    return scenes
 
 
 def _camouflage(rng) -> list:
@@ -541,23 +585,46 @@ def multi_specs(seed: int = 0, size: str = "medium") -> list:
     return specs
 
 
+def periodic_specs(seed: int = 0, size: str = "medium") -> list:
+    """The periodic set as ``(name, keywords)``, as :func:`stress_specs`: twelve two-layer
+    scenes where a whole period is a valid match for either layer, stripes of 3-32 px on both
+    layers (one period or two, vertical or at an angle) or on the object over a weak
+    background; names ``periodic_VARIANT``."""
+    if size not in SIZES:
+        raise ValueError(f"size: unknown {size!r}; valid: {', '.join(SIZES)}")
+    width, height = SIZES[size]
+    scale = width / SIZES["medium"][0]
+    rng = np.random.default_rng([int(seed), 3])
+    specs = []
+    for variant, description, params in _periodic_hard(rng):
+        keywords = _placed(params, rng, scale)
+        keywords.update(width=width, height=height, d_max_step=_D_MAX_STEP,
+                        seed=int(seed) * 1000 + len(specs),
+                        meta={"family": "periodic", "description": description,
+                              "stress_seed": int(seed), "size": size})
+        specs.append((f"periodic_{variant}", keywords))
+    return specs
+
+
 def write_stress_set(out_dir, seed: int = 0, size: str = "medium", random: int = 0,
-                     multi: bool = False) -> list:
+                     multi: bool = False, periodic: bool = False) -> list:
     """Write every scene of :func:`stress_specs` (or, with ``random`` > 0, of
-    :func:`random_specs` with that count; with ``multi``, of :func:`multi_specs`) into
-    ``out_dir/NAME``; returns the folders."""
+    :func:`random_specs` with that count; with ``multi``, of :func:`multi_specs`; with
+    ``periodic``, of :func:`periodic_specs`) into ``out_dir/NAME``; returns the folders."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"out_dir: {out} exists and is not a folder")
-    if multi and random > 0:
-        raise ValueError(f"random: the multi family has no random draws, got random={random}")
+    if sum((bool(random > 0), bool(multi), bool(periodic))) > 1:
+        raise ValueError(f"expected one of random, multi and periodic, got random={random}, "
+                         f"multi={multi}, periodic={periodic}")
     folders = []
     if multi:
         for name, keywords in multi_specs(seed, size):
             write_multi_scene(out / name, name=name, **keywords)
             folders.append(out / name)
         return folders
-    specs = random_specs(seed, random, size) if random > 0 else stress_specs(seed, size)
+    specs = (random_specs(seed, random, size) if random > 0 else
+             periodic_specs(seed, size) if periodic else stress_specs(seed, size))
     for name, keywords in specs:
         write_scene(out / name, None, name=name, **keywords)
         folders.append(out / name)
@@ -572,7 +639,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def main(argv=None) -> int:
-    """``python -m lss_kernels.stress OUT [--seed S] [--size SIZE] [--random N | --multi]``."""
+    """``python -m lss_kernels.stress OUT [--seed S] [--size SIZE] [--random N | --multi |
+    --periodic]``."""
     parser = _Parser(prog="python -m lss_kernels.stress",
                      description="Write the stress set of hard rendered two-layer scenes "
                                  "(docs/stress.md) as scene folders under OUT.")
@@ -586,18 +654,24 @@ def main(argv=None) -> int:
     parser.add_argument("--multi", action="store_true",
                         help="the multi-object family instead (whole photos: one clicked "
                              "object among others, docs/scene-format.md)")
+    parser.add_argument("--periodic", action="store_true",
+                        help="the periodic set instead: twelve scenes of stripes on both "
+                             "layers or on the object over a weak background")
     args = parser.parse_args(argv)
     if args.random < 0:
         parser.error(f"--random: expected a number of scenes >= 0, got {args.random}")
-    if args.multi and args.random:
-        parser.error("--multi: not with --random")
+    if sum((bool(args.random), args.multi, args.periodic)) > 1:
+        parser.error("--random, --multi and --periodic: one at a time")
+    if args.periodic and args.size not in SIZES:
+        parser.error(f"--size: the periodic set has {', '.join(SIZES)}, got {args.size}")
     try:
-        folders = write_stress_set(args.out, args.seed, args.size, args.random, args.multi)
+        folders = write_stress_set(args.out, args.seed, args.size, args.random, args.multi,
+                                   args.periodic)
     except (ValueError, OSError) as exc:
         print(f"{parser.prog}: error: {exc}", file=sys.stderr)
         return 1
     kind = ("random" if args.random else "multi-object" if args.multi
-            else f"{len(STRESS_FAMILIES)} families")
+            else "periodic" if args.periodic else f"{len(STRESS_FAMILIES)} families")
     print(f"wrote {len(folders)} scenes ({kind}, {args.size}, seed {args.seed}) to {args.out}")
     return 0
 

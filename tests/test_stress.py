@@ -456,3 +456,52 @@ def test_multi_family_renders_at_every_size(seed):
         for name, keywords in stress.multi_specs(seed, size):
             scene = make_multi_scene(**{k: v for k, v in keywords.items() if k != "meta"})
             assert scene.d_max == d_max and scene.fg_left.sum() > 0.02 * scene.fg_left.size
+
+
+# ------------------------------------------------------------------------------- periodic set
+def test_periodic_set_holds_what_it_promises(tmp_path):
+    folders = stress.write_stress_set(tmp_path, seed=0, size="small", periodic=True)
+    scenes = [load_scene(f) for f in folders]
+    assert len(scenes) == 12 and all(s.name.startswith("periodic_") for s in scenes)
+    both = fg_only = checked = 0
+    for scene in scenes:
+        spec = scene.meta["spec"]
+        fg, bg = spec["texture_fg"], spec["texture_bg"]
+        assert fg["kind"] == "stripes" and 3 <= fg["period"] <= 32, scene.name
+        if bg["kind"] == "stripes":
+            both += 1
+            assert 3 <= bg["period"] <= 32, scene.name
+        else:
+            fg_only += 1
+            assert bg["kind"] == "low_contrast", scene.name
+        s = score(scene.disp_left, scene.occ_left, scene)
+        assert (s["occ_f1"], s["bad4"]) == (1.0, 0.0) and s["n_true_occ"] > 0, scene.name
+        # vertical stripes of a period the rows show
+        for mask, texture in _layers(scene, "stripes"):
+            if texture.get("angle", 0.0) == 0 and texture["period"] <= 12:
+                y = np.flatnonzero(mask.sum(axis=1) >= 40)[0] + 2
+                xs = np.flatnonzero(mask[y])[:40]
+                lag, corr = _period(_grey(scene)[y, xs], lags=range(2, 16))
+                turns = lag / texture["period"]           # a whole number of periods
+                assert abs(turns - round(turns)) * texture["period"] <= 1 and corr > 0.6, \
+                    (scene.name, lag)
+                checked += 1
+    assert both >= 9 and fg_only == 3 and checked >= 6
+    angles = {s.meta["spec"]["texture_fg"].get("angle", 0.0) for s in scenes}
+    assert len(angles) >= 3                       # vertical, at an angle and crossed
+    periods = [s.meta["spec"]["texture_fg"]["period"] for s in scenes]
+    assert min(periods) < 6 and max(periods) > 20
+
+
+def test_periodic_set_is_deterministic_and_apart_from_the_stress_set(tmp_path, capsys):
+    a = stress.periodic_specs(seed=1, size="small")
+    assert a == stress.periodic_specs(seed=1, size="small")
+    assert a != stress.periodic_specs(seed=2, size="small")
+    assert not {n for n, _ in a} & {n for n, _ in stress.stress_specs(seed=1, size="small")}
+    assert stress.main([str(tmp_path / "p"), "--periodic", "--size", "small"]) == 0
+    assert len(list_scenes(tmp_path / "p")) == 12 and "periodic" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exc:
+        stress.main([str(tmp_path / "x"), "--periodic", "--multi"])
+    assert exc.value.code == 2 and "one at a time" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="one of random, multi and periodic"):
+        stress.write_stress_set(tmp_path / "y", periodic=True, random=3)
