@@ -48,6 +48,7 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 
 from .io import Scene, save_scene
+from .model.quadratic import evaluate
 from .metrics import BAND_RADIUS, _dilate_rows, band_from_foreground, boundary_from_foreground
 from .textures import TEXTURES, make_texture
 
@@ -225,12 +226,6 @@ def _theta(d, name: str) -> np.ndarray:
     return theta
 
 
-def _disparity(theta: np.ndarray, x, y):
-    """``Theta . U(x, y)``, U = (x^2, xy, y^2, x, y, 1), left-view pixels."""
-    return theta[0] * x * x + theta[1] * x * y + theta[2] * y * y + theta[3] * x \
-        + theta[4] * y + theta[5]
-
-
 def _source_x(theta: np.ndarray, xr, y):
     """Left-view x of the surface point seen at right-view ``(xr, y)``: ``x - d(x, y) = xr``.
 
@@ -283,7 +278,7 @@ def _check_surfaces(surfaces: list, names: list, width: int, height: int, pad: i
     right view: ``d/dx < 0.9`` over the rendered domain (``pad`` columns either side)."""
     y, x = np.mgrid[0:height, -pad:width + pad].astype(np.float64)
     for i, (surface, name) in enumerate(zip(surfaces, names)):
-        d = _disparity(surface.theta, x, y)
+        d = evaluate(surface.theta, x, y)
         dx = 2 * surface.theta[0] * x + surface.theta[1] * y + surface.theta[3]
         if (i == 0 or surface.box is not None) and d[:, pad:-pad].min() < 0:
             raise ValueError(f"{name}: disparity must be >= 0 in the image, min is "
@@ -307,9 +302,9 @@ def _check(spec: SceneSpec, surfaces: list, ellipse, pad: int) -> None:
     inside = _inside(ellipse, x, y, spec.outline)
     if not inside.any():
         raise ValueError(f"ellipse: {ellipse} covers no pixel of the {spec.width}x{spec.height} image")
-    d_fg = _disparity(surfaces[-1].theta, x, y)
+    d_fg = evaluate(surfaces[-1].theta, x, y)
     for surface, name in zip(surfaces[:-1], names):
-        behind = ~surface.covers(x, y) | (_disparity(surface.theta, x, y) < d_fg)
+        behind = ~surface.covers(x, y) | (evaluate(surface.theta, x, y) < d_fg)
         if not behind[inside].all():
             what = "background" if name == "d_bg" else f"prop ({name[:-3]})"
             raise ValueError(f"d_fg, {name}: the foreground must be in front of the {what} "
@@ -377,7 +372,7 @@ def _surfaces(items, what: str) -> list:
 def _pad(surfaces: list, width: int, height: int) -> int:
     """Columns rendered beyond each side of the image: the largest |disparity| + 4."""
     y, x = np.mgrid[0:height, 0:width].astype(np.float64)
-    return int(math.ceil(max(np.abs(_disparity(s.theta, x, y)).max() for s in surfaces))) + 4
+    return int(math.ceil(max(np.abs(evaluate(s.theta, x, y)).max() for s in surfaces))) + 4
 
 
 def _geometry(spec: SceneSpec) -> tuple:
@@ -398,10 +393,10 @@ def _nearest(surfaces: list, y, source):
     on the ray, that point's left-view x and its disparity (larger is nearer).
     ``source(surface)`` gives the left-view x of each ray's point on a surface (NaN: none)."""
     xs = source(surfaces[0])
-    index, d = np.zeros(y.shape, np.int64), _disparity(surfaces[0].theta, xs, y)
+    index, d = np.zeros(y.shape, np.int64), evaluate(surfaces[0].theta, xs, y)
     for k, surface in enumerate(surfaces[1:], 1):
         xk = source(surface)
-        dk = _disparity(surface.theta, xk, y)
+        dk = evaluate(surface.theta, xk, y)
         take = surface.covers(xk, y) & (dk > d)
         index, xs, d = np.where(take, k, index), np.where(take, xk, xs), np.where(take, dk, d)
     return index, xs, d
@@ -505,7 +500,7 @@ def make_scene(preset: str | None = "easy", *, seed: int = 0, **params) -> Scene
     cx, cy, rx, ry = ellipse
     init = (cx + spec.init_shift[0], cy + spec.init_shift[1],
             rx * spec.init_scale, ry * spec.init_scale)
-    d_centre = float(_disparity(theta_fg, cx, cy))
+    d_centre = float(evaluate(theta_fg, cx, cy))
     name = f"{preset or 'custom'}_seed{seed}"
     step = int(spec.d_max_step)
     return Scene(
@@ -645,8 +640,8 @@ def make_multi_scene(*, seed: int = 0, **params) -> Scene:
     y, x = np.mgrid[0:h, 0:w].astype(np.float64)
     xr = x - d_left
     xk = _source_x(clicked.theta, xr, y)
-    own_occ = ~fg & clicked.covers(xk, y) & (_disparity(clicked.theta, xk, y) > d_left)
-    nearer = ~fg & (d_left > _disparity(clicked.theta, x, y))
+    own_occ = ~fg & clicked.covers(xk, y) & (evaluate(clicked.theta, xk, y) > d_left)
+    nearer = ~fg & (d_left > evaluate(clicked.theta, x, y))
     boundary, roi_fg, roi_bg = object_band(fg, nearer, occ & ~own_occ & (xr >= -0.5),
                                            spec.band_radius)
 

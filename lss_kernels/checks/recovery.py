@@ -48,6 +48,7 @@ import warnings
 
 import numpy as np
 
+from ..model.quadratic import evaluate
 from ..start_types import InitError, UnreliableStartWarning
 from .periodicity import PERIODIC_AREA
 
@@ -82,9 +83,8 @@ def model_health(result, d_max) -> dict:
         return {"area": 0.0, "jump": 0.0, "crossing": 1.0, "out_of_range": 0.0, **offsets}
     y, x = np.nonzero(fg)
     x, y = x.astype(np.float64), y.astype(np.float64)
-    basis = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=-1)
-    front = basis @ np.asarray(result.theta_fg, np.float64)
-    jump = front - basis @ np.asarray(result.theta_bg, np.float64)
+    front = evaluate(result.theta_fg, x, y)
+    jump = front - evaluate(result.theta_bg, x, y)
     return {"area": float(fg.mean()), "jump": float(jump.mean()),
             "crossing": float((jump <= 0).mean()),
             "out_of_range": float(((front < 0) | (front > float(d_max))).mean()), **offsets}

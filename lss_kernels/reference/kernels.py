@@ -14,6 +14,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from ..kernels.filters import gaussian_taps
 from ..model import FIXED_POINT_STEPS
+from ..model.quadratic import basis, evaluate
 
 __all__ = [
     "census", "matching_cost", "box_sum", "box_mean", "box_extreme", "patches_containing",
@@ -248,16 +249,9 @@ def _normalised(x, y, H, W):
     return (x - (W - 1) / 2.0) * inv_s, (y - (H - 1) / 2.0) * inv_s
 
 
-def basis(xn, yn):
-    """The paper's basis {x^2, xy, y^2, x, y, 1} at (normalised) coordinates, last axis."""
-    return np.stack([xn * xn, xn * yn, yn * yn, xn, yn, np.ones_like(xn)], axis=-1)
-
-
 def shape_value(theta_j, x, y, shape):
     """Theta_j at real cyclopean pixel coordinates of an image of ``shape = (H, W)``."""
-    xn, yn = _normalised(x, y, *shape)
-    t = theta_j
-    return t[0] * xn * xn + t[1] * xn * yn + t[2] * yn * yn + t[3] * xn + t[4] * yn + t[5]
+    return evaluate(theta_j, *_normalised(x, y, *shape))
 
 
 def fit_shape(weight, target, previous):
