@@ -131,6 +131,30 @@ def test_one_iteration_at_a_width_of_partial_lane_blocks(fresh_taichi):
     solver.close()
 
 
+@pytest.mark.parametrize("switch", [{"subpixel_messages": False}, {"narrow_band": 0.0}],
+                         ids=["integer_argmin", "no_narrow_band"])
+def test_the_papers_switches_match_the_specification(fresh_taichi, switch):
+    """The iteration with the switches that ``Params.paper()`` turns to the paper's method
+    (Eq. 5's integer argmin; Eq. 2's step everywhere, no narrow band): three iterations, each
+    against numpy's from the kernels' own state before it."""
+    from lss_kernels.solver import Solver
+    params = PARAMS.replace(**switch)
+    left, right, init = synthetic_pair(W, H, D_MAX, seed=1)
+    solver = Solver(left, right, D_MAX, init, params=params)
+    state = npi.state_from_solver(solver)
+    moved = 0.0
+    for _ in range(3):
+        spec, _ = npi.iteration(state, params)
+        default, _ = npi.iteration(state, PARAMS)      # what the switch changes
+        moved = max(moved, np.abs(spec.phi - default.phi).max(),
+                    np.abs(spec.extra["consensus_mean"] - default.extra["consensus_mean"]).max())
+        solver.step()
+        state = npi.state_from_solver(solver)
+        _check(state, spec)
+    assert moved > 1e-3
+    solver.close()
+
+
 @pytest.mark.parametrize("width", [56, 61])
 def test_a_single_patch_level_matches_the_specification(fresh_taichi, width):
     """With one level of patches the pixels' consensus reads that level's relays one patch
