@@ -131,12 +131,14 @@ def test_one_iteration_at_a_width_of_partial_lane_blocks(fresh_taichi):
     solver.close()
 
 
-@pytest.mark.parametrize("switch", [{"subpixel_messages": False}, {"narrow_band": 0.0}],
-                         ids=["integer_argmin", "no_narrow_band"])
+@pytest.mark.parametrize("switch", [{"subpixel_messages": False}, {"narrow_band": 0.0},
+                                    {"message_ambiguity": 0.9}],
+                         ids=["integer_argmin", "no_narrow_band", "message_ambiguity"])
 def test_the_papers_switches_match_the_specification(fresh_taichi, switch):
     """The iteration with the switches that ``Params.paper()`` turns to the paper's method
-    (Eq. 5's integer argmin; Eq. 2's step everywhere, no narrow band): three iterations, each
-    against numpy's from the kernels' own state before it."""
+    (Eq. 5's integer argmin; Eq. 2's step everywhere, no narrow band) and with the messages
+    weighted by their distinctness (a periodic pair's): three iterations, each against
+    numpy's from the kernels' own state before it."""
     from lss_kernels.solver import Solver
     params = PARAMS.replace(**switch)
     left, right, init = synthetic_pair(W, H, D_MAX, seed=1)

@@ -177,7 +177,9 @@ def iteration(state: IterationState, params):
     seconds["messages"], t = now - t, now
 
     # downward: Eq. 7
-    precision, mean = ref.consensus(d_p, sigma_p, valid, sizes)
+    weights = ([ref.distinctness(cost, p.message_ambiguity) for cost in state.costs]
+               if p.message_ambiguity > 0 else None)
+    precision, mean = ref.consensus(d_p, sigma_p, valid, sizes, weights)
     now = time.perf_counter()
     seconds["downward"], t = now - t, now
 

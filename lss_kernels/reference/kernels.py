@@ -157,13 +157,16 @@ def distinctness(cost, ambiguity):
     return np.clip((1.0 - r) / ambiguity, 0.0, 1.0)
 
 
-def consensus(d_p, sigma_p, valid, sizes):
+def consensus(d_p, sigma_p, valid, sizes, weights=None):
     """Eq. 7: per pixel, 1/sigma^2 and d-bar from all valid patches (of every level) that
-    contain it.  Lists per level of ``(H, W)`` arrays; returns ``(precision, mean)``."""
-    a = sum(patches_containing(np.where(v, 1.0 / s ** 2, 0.0), size)
-            for s, v, size in zip(sigma_p, valid, sizes))
-    b = sum(patches_containing(np.where(v, d / s ** 2, 0.0), size)
-            for d, s, v, size in zip(d_p, sigma_p, valid, sizes))
+    contain it, each patch's 1/sigma^2 times its weight (``weights``: per level, the
+    :func:`distinctness` of its patches; None: 1).  Lists per level of ``(H, W)`` arrays;
+    returns ``(precision, mean)``."""
+    weights = [1.0] * len(sizes) if weights is None else weights
+    a = sum(patches_containing(np.where(v, q / s ** 2, 0.0), size)
+            for s, v, q, size in zip(sigma_p, valid, weights, sizes))
+    b = sum(patches_containing(np.where(v, q * d / s ** 2, 0.0), size)
+            for d, s, v, q, size in zip(d_p, sigma_p, valid, weights, sizes))
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(a > 0, b / a, 0.0)
     return a, mean
