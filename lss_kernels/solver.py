@@ -228,8 +228,8 @@ class Solver:
         image fields, and its matching costs."""
         self.shift = shift
         model_left, model_right = model_pair(left, right, shift)
-        self.left.from_numpy(self.extent.padded(model_left))
-        self.right.from_numpy(self.extent.padded(model_right))
+        self.pool.write(self.left, self.extent.padded(model_left))
+        self.pool.write(self.right, self.extent.padded(model_right))
         self.matching.setup(self.left, self.right)
         self.hierarchy.build_costs(self.matching, self.left, self.right)
 
@@ -336,14 +336,15 @@ class Solver:
         ls.evolve(hier.matching_cost, self.c_max, self.shapes, self.occ, p, reinit)
         if reinit and p.stop_shift > 0 and p.stop_surface > 0:  # since the last re-init
             self.shapes.moved(ls.phi)
-            self._moved = max(self._moved, 2.0 * float(self.shapes.change[None]))
+            self._moved = max(self._moved, 2.0 * float(self.pool.read(self.shapes.change)))
         t = self._stage("levelset", t)
-        flipped, area = int(ls.flipped[None]), int(ls.area[None])
+        flipped, area = int(self.pool.read(ls.flipped)), int(self.pool.read(ls.area))
         seconds = time.perf_counter() - t_iter
         self._t_loop += seconds
         if self._rule.is_window_end(self.iteration):
             ls.net_change()
-            self._shift = int(ls.changed[None]) / max(int(ls.boundary[None]), 1)
+            self._shift = (int(self.pool.read(ls.changed))
+                           / max(int(self.pool.read(ls.boundary)), 1))
             self._surface, self._moved = self._moved, 0.0
             self._rule.record(self._shift, self._surface)
         stats = dict(iteration=self.iteration, flipped=flipped, boundary_shift=self._shift,

@@ -257,6 +257,80 @@ def _zero_all(fields: ti.template()):
                 f[I] = ti.cast(0, f.dtype)
 
 
+@ti.func
+def _element(f: ti.template(), offset: ti.template(), i):
+    """The index of the ``i``-th element of ``f`` in row-major order (``offset``: the
+    field's first index)."""
+    shape = ti.static(f.shape)
+    index = ti.Vector([0] * len(shape))
+    rest = i
+    for a in ti.static(range(len(shape))):
+        axis = ti.static(len(shape) - 1 - a)
+        index[axis] = rest % shape[axis] + offset[axis]
+        rest //= shape[axis]
+    return index
+
+
+@ti.func
+def _count(f: ti.template()):
+    n = 1
+    for a in ti.static(range(len(f.shape))):
+        n *= f.shape[a]
+    return n
+
+
+@ti.kernel
+def _host_read(fields: ti.template(), offsets: ti.template(), which: ti.i32,
+               out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+    # one loop per field, of length 0 but for the one asked for: one kernel reads them all
+    for k in ti.static(range(len(fields))):
+        f = ti.static(fields[k])
+        for i in range(ti.select(which == k, _count(f), 0)):
+            if ti.static(len(f.shape) == 0):
+                if ti.static(isinstance(f, ti.MatrixField)):
+                    for c in ti.static(range(f.n)):
+                        out[i, c] = ti.cast(f[None][c], ti.f64)
+                else:
+                    out[i, 0] = ti.cast(f[None], ti.f64)
+            else:
+                I = _element(f, offsets[k], i)
+                if ti.static(isinstance(f, ti.MatrixField)):
+                    for c in ti.static(range(f.n)):
+                        out[i, c] = ti.cast(f[I][c], ti.f64)
+                else:
+                    out[i, 0] = ti.cast(f[I], ti.f64)
+
+
+@ti.kernel
+def _host_write(fields: ti.template(), offsets: ti.template(), which: ti.i32,
+                src: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+    for k in ti.static(range(len(fields))):
+        f = ti.static(fields[k])
+        for i in range(ti.select(which == k, _count(f), 0)):
+            if ti.static(len(f.shape) == 0):
+                if ti.static(isinstance(f, ti.MatrixField)):
+                    for c in ti.static(range(f.n)):
+                        f[None][c] = ti.cast(src[i, c], f.dtype)
+                else:
+                    f[None] = ti.cast(src[i, 0], f.dtype)
+            else:
+                I = _element(f, offsets[k], i)
+                if ti.static(isinstance(f, ti.MatrixField)):
+                    for c in ti.static(range(f.n)):
+                        f[I][c] = ti.cast(src[i, c], f.dtype)
+                else:
+                    f[I] = ti.cast(src[i, 0], f.dtype)
+
+
+def _numpy_dtype(dtype):
+    for np_type, types in ((np.float32, (ti.f32,)), (np.float64, (ti.f64,)),
+                           (np.int32, (ti.i32,)), (np.int8, (ti.i8,)), (np.uint8, (ti.u8,)),
+                           (np.int16, (ti.i16,)), (np.uint16, (ti.u16,)), (np.int64, (ti.i64,))):
+        if dtype in types:
+            return np_type
+    raise TypeError(f"FieldPool: no host transfer for fields of {dtype}")
+
+
 #: The smallest side of a size bucket, pixels (see :func:`bucket_size`).
 BUCKET_MIN = 64
 
@@ -327,6 +401,7 @@ class FieldPool:
         self._loaders = []
         self._bytes = 0
         self.fields = []
+        self._offsets = []
         self.generation = None
         self._annexes = []
 
@@ -390,6 +465,7 @@ class FieldPool:
             n *= s
         self._bytes += n * nbytes
         self.fields.append(f)
+        self._offsets.append(tuple(offset) if offset is not None else (0,) * len(shape))
         return f
 
     def field(self, dtype, shape, offset=None, order=None, volume=False, bucket=False):
@@ -423,6 +499,40 @@ class FieldPool:
             load()
         for annex in self._annexes:
             annex.zero()
+
+    def _owner(self, f):
+        """The pool (this one or an annex) that holds ``f``, and ``f``'s index in it."""
+        for part in (self, *self._annexes):
+            for k, g in enumerate(part.fields):
+                if g is f:
+                    return part, k
+        raise ValueError("FieldPool: the field is not one of this pool's")
+
+    def read(self, f):
+        """The whole of field ``f`` (this pool's or an annex's) as a numpy array of its
+        shape (vector fields: one more axis) and dtype.  One kernel reads every field of a
+        pool (``to_numpy`` compiles one per field)."""
+        part, k = self._owner(f)
+        n = int(np.prod(f.shape, dtype=np.int64))
+        m = f.n if isinstance(f, ti.MatrixField) else 1
+        out = np.zeros((max(n, 1), m), np.float64)
+        _host_read(tuple(part.fields), tuple(part._offsets), k, out)
+        shape = tuple(f.shape) + ((m,) if isinstance(f, ti.MatrixField) else ())
+        return out.reshape(shape).astype(_numpy_dtype(f.dtype))
+
+    def write(self, f, array):
+        """Write ``array`` (``f``'s shape, vector fields with one more axis) into field
+        ``f`` (this pool's or an annex's): the one kernel that writes every field of a
+        pool."""
+        part, k = self._owner(f)
+        m = f.n if isinstance(f, ti.MatrixField) else 1
+        src = np.asarray(array)
+        expected = tuple(f.shape) + ((m,) if isinstance(f, ti.MatrixField) else ())
+        if src.shape != expected:
+            raise ValueError(f"FieldPool.write: expected an array of shape {expected}, "
+                             f"got {src.shape}")
+        _host_write(tuple(part.fields), tuple(part._offsets), k,
+                    np.ascontiguousarray(src.reshape(-1, m), dtype=np.float64))
 
     def destroy(self):
         """Free the pool's trees; a pool of an earlier :func:`generation` only drops them."""
@@ -469,17 +579,13 @@ class Extent:
     def __init__(self, pool, height, width):
         self.H, self.W = int(height), int(width)
         self.bucket = bucket_shape(self.H, self.W)
+        self.pool = pool
         self.size = pool.field(ti.i32, (2,), bucket=True)
         pool.on_load(self.load)
 
-    @ti.kernel
-    def _load(self, height: ti.i32, width: ti.i32):
-        self.size[0] = height
-        self.size[1] = width
-
     def load(self):
         """Write ``H`` and ``W`` into the field (the pool calls it)."""
-        self._load(self.H, self.W)
+        self.pool.write(self.size, np.array([self.H, self.W]))
 
     @ti.func
     def height(self):
@@ -491,7 +597,7 @@ class Extent:
 
     def image(self, f):
         """The ``H x W`` region of a bucket-shaped field as a numpy array."""
-        return np.ascontiguousarray(f.to_numpy()[:self.H, :self.W])
+        return np.ascontiguousarray(self.pool.read(f)[:self.H, :self.W])
 
     def padded(self, array):
         """``array`` (``(H, W, ...)``) zero-padded to the bucket's shape."""

@@ -197,7 +197,8 @@ class BoundaryCosts:
 
     def build(self, cost_level1, left, right, params):
         """Everything B needs, once per solve."""
-        self.alpha[None] = [params.alpha_occ, params.alpha_mono, params.alpha_const]
+        self.extent.pool.write(self.alpha, np.array([params.alpha_occ, params.alpha_mono,
+                                                     params.alpha_const]))
         self.build_occ(cost_level1, params.occ_sigma, params.occ_threshold)
         self.build_mono(left, right, params.mono_threshold)
 

@@ -168,6 +168,7 @@ class InitialRegion:
 
     def __init__(self, pool, H: int, W: int):
         self.H, self.W = H, W
+        self.pool = pool
         self.d = pool.field(ti.f32, (H, W))         # d-bar (-1: no match), then its median
         self.d_hi = pool.field(ti.f32, (H, W))      # d-bar's largest over a 5x5 window
         self.label = pool.field(ti.i32, (H, W))     # region id, -1 outside
@@ -335,9 +336,9 @@ class InitialRegion:
 
     def until_stable(self, launch) -> int:
         for rounds in range(1, MAX_ROUNDS + 1):
-            self.changed[None] = 0
+            self.pool.write(self.changed, np.array(0))
             launch()
-            if self.changed[None] == 0:
+            if self.pool.read(self.changed) == 0:
                 return rounds
         return MAX_ROUNDS
 
@@ -405,7 +406,7 @@ class InitialRegion:
         """The labelled pixels widened by ``radius`` (``left`` to the left), as a mask."""
         self.erode(0)
         self.dilate(radius, radius if left is None else left)
-        return self.label.to_numpy() >= 0
+        return self.pool.read(self.label) >= 0
 
     def _candidates(self, background):
         """The near pixels ``contrast`` above ``background`` (None: all of them), opened,
@@ -415,7 +416,7 @@ class InitialRegion:
         self.erode(OPENING // 2)
         self.dilate(OPENING // 2, OPENING // 2)
         rounds = self.until_stable(self.propagate)
-        mask, facts = pick_region(self.label.to_numpy(), int(MIN_AREA * self.H * self.W))
+        mask, facts = pick_region(self.pool.read(self.label), int(MIN_AREA * self.H * self.W))
         return mask, {**facts, "rounds": rounds}
 
     def _nested(self, mask, near, d):
@@ -427,7 +428,7 @@ class InitialRegion:
         if inner is None:
             return mask, near
         index = np.arange(self.H * self.W, dtype=np.int32).reshape(self.H, self.W)
-        self.label.from_numpy(np.where(mask, index, -1).astype(np.int32))
+        self.pool.write(self.label, np.where(mask, index, -1).astype(np.int32))
         self.keep_above(inner.astype(np.float32), NEST_CONTRAST)
         sub, facts = self._candidates(None)
         info.update(facts)
@@ -439,7 +440,7 @@ class InitialRegion:
 
     def _point(self, point):
         H, W = self.H, self.W
-        d = self.d.to_numpy()
+        d = self.pool.read(self.d)
         y, xc = (min(max(int(round(v)), 0), n - 1) for v, n in ((point.y, H), (point.x, W)))
         for _ in range(3):                       # left view -> cyclopean: x_c = x - c(x_c)
             c = max(float(d[y, xc]), 0.0)
@@ -451,17 +452,19 @@ class InitialRegion:
                             f"pick a textured pixel on the object")
         seed_d = float(np.median(patch))
         band = max(BAND_MIN, BAND * seed_d)
-        near = bool(self.label[y, xc] >= 0)
+        near = bool(self.pool.read(self.label)[y, xc] >= 0)
         if near:
             self.keep_near()
         self.seed(y, xc)
-        self.d[y, xc] = seed_d
+        d = self.pool.read(self.d)            # without what keep_near took away
+        d[y, xc] = seed_d
+        self.pool.write(self.d, d)
         def round_():
             self.grow(seed_d, band, band)
             if self.bridge_gap > 0:
                 self.bridge(seed_d, band, self.bridge_gap)
         rounds = self.until_stable(round_)
-        found = int((self.label.to_numpy() == 1).sum())
+        found = int((self.pool.read(self.label) == 1).sum())
         self.info = {"kind": "point", "point": [point.x, point.y], "seed_cyclopean": [xc, y],
                      "seed_disparity": 2.0 * seed_d, "band_px": 2.0 * band,
                      "over": "near pixels" if near else "all pixels", "found": found,
@@ -475,16 +478,16 @@ class InitialRegion:
         return self._widened(SPILL, SPILL_LEFT)
 
     def _auto(self):
-        labels = self.label.to_numpy()
+        labels = self.pool.read(self.label)
         near = labels >= 0
-        d = self.d.to_numpy()
+        d = self.pool.read(self.d)
         background, fit = background_fit(d)
         mask, facts = self._candidates(background)
         if mask is None and background is not None:
             # a jump below the fit's band leaves the object among the fit's inliers, and the
             # quadratic bulges over it: fit again from the pixels that are not near, with
             # the near pixels' own contrast as the band
-            self.label.from_numpy(labels)
+            self.pool.write(self.label, labels)
             background, fit = background_fit(d, band=CONTRAST, start=~near)
             mask, facts = self._candidates(background)
             fit["start"] = "the pixels that are not near (no region above the first fit)"
@@ -499,9 +502,9 @@ class InitialRegion:
             mask, near = self._nested(mask, near, d)
         # the object's extent: its near pixels within REGROW of the pixels above the fit
         # (where the object pulls the fit up, its rim is not above it)
-        self.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
+        self.pool.write(self.label, np.where(mask, 0, -1).astype(np.int32))
         self.erode(0)
         self.dilate(REGROW, REGROW)
-        mask = ((self.label.to_numpy() >= 0) & near) | mask
-        self.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
+        mask = ((self.pool.read(self.label) >= 0) & near) | mask
+        self.pool.write(self.label, np.where(mask, 0, -1).astype(np.int32))
         return self._widened()

@@ -438,7 +438,7 @@ class LevelSet:
     def start(self, mask, c_max):
         """phi = phi_scale x signed distance of a boolean ``(H, W)`` mask; D will be clamped
         to [0, ``c_max``]."""
-        self.d_limit[None] = float(c_max)
+        self.extent.pool.write(self.d_limit, np.array(float(c_max)))
         self._from_mask(np.ascontiguousarray(mask, dtype=np.int32))
         self.reinitialise(self.phi_next)
         self._take_next()

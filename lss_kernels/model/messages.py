@@ -25,6 +25,7 @@ integer messages).
 
 Frame: cyclopean; disparities ``c = 1 .. c_max`` (volume index ``k = c - 1``).
 """
+import numpy as np
 import taichi as ti
 
 __all__ = ["Messages"]
@@ -218,7 +219,7 @@ class Messages:
             self._distinct_version = self.hierarchy.cost_version
         if self._cached != cached:
             for level in self.levels:
-                level.key.fill(0)
+                self.extent.pool.write(level.key, np.zeros(level.key.shape + (level.key.n,)))
             self._cached = cached
         self._all_levels(beta, int(use_validity), bool(keep))
 

@@ -315,7 +315,7 @@ class LayerRefinement:
         self._load(surface, foreground, occlusion, float(d_max))
         for R, window, smoothing in self.passes:
             self._start_pass(R)
-            low, high = (int(v) for v in self.span.to_numpy())
+            low, high = (int(v) for v in self.extent.pool.read(self.span))
             for d in range(max(low - R, 0), min(high + R, int(d_max)) + 1):
                 self._match_rows(left, right, d)
                 self._column_prefix(window)

@@ -91,7 +91,7 @@ class GlobalShapes:
         for one size, bit for bit."""
         f32 = np.float32
         inv_s = f32(self.inv_s)
-        self.frame.from_numpy(np.array([f32(-f32(self.cx)) * inv_s,
+        self.extent.pool.write(self.frame, np.array([f32(-f32(self.cx)) * inv_s,
                                         f32(-f32(self.cy)) * inv_s, inv_s], np.float32))
 
     @ti.func
@@ -269,11 +269,11 @@ class GlobalShapes:
 
     def set(self, theta_fg, theta_bg):
         """Set both shapes from normalised-basis coefficients (cyclopean units)."""
-        self.theta.from_numpy(np.stack([theta_fg, theta_bg]).astype(np.float32))
+        self.extent.pool.write(self.theta, np.stack([theta_fg, theta_bg]).astype(np.float32))
 
     def pixel_coefficients(self, scale=1.0):
         """``(2, 6)`` coefficients over raw cyclopean pixel coordinates."""
-        th = self.theta.to_numpy()
+        th = self.extent.pool.read(self.theta)
         return np.stack([to_pixel_coefficients(t, self.H, self.W, scale) for t in th])
 
 

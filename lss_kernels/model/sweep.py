@@ -169,7 +169,7 @@ class BackgroundSweep:
         self._select(cost, shapes, phi, phi_plus, consensus, NEAR)
         self._accumulate(cost)
         self._reduce()
-        c = choose_plane(self.totals.to_numpy().astype(np.float64), params.background_sweep,
+        c = choose_plane(self.extent.pool.read(self.totals).astype(np.float64), params.background_sweep,
                          self.H * self.W)
         if c is not None:
             self._set_plane(shapes, c)
