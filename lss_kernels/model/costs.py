@@ -102,19 +102,17 @@ class BoundaryCosts:
         return s
 
     @ti.kernel
-    def _smooth_y(self, src: ti.template(), taps: ti.template(), y0: ti.i32):
-        """Rows y0 .. of src (as many as the chunk holds), smoothed along y, into the chunk
-        (the block and its filter reach are read in their memory order)."""
+    def _occ_chunk(self, src: ti.template(), taps: ti.template(), dtaps: ti.template(),
+                   threshold: ti.f32, y0: ti.i32):
+        """B_occ's features of rows y0 .. of ``src`` (as many as the chunk holds): the rows
+        smoothed along y into the chunk (the block and its filter reach are read in their
+        memory order), then |d/dx of the chunk| above ``threshold``."""
         for r, k, x in ti.ndrange(self._chunk.shape[0], self.C, self.extent.width()):
             if y0 + r < self.extent.height():
                 self._chunk[r, x, k] = self._correlate(src, taps, y0 + r, x, k, 0)
-
-    @ti.kernel
-    def _occ_features(self, taps: ti.template(), threshold: ti.f32, y0: ti.i32):
-        """B_occ's features of those rows: |d/dx of the chunk| above ``threshold``."""
         for r, k, x in ti.ndrange(self._chunk.shape[0], self.C, self.extent.width()):
             if y0 + r < self.extent.height():
-                s = self._correlate(self._chunk, taps, r, x, k, 1)
+                s = self._correlate(self._chunk, dtaps, r, x, k, 1)
                 self.b_occ[y0 + r, x, k] = 0.0 if ti.abs(s) > threshold else INF
 
     @ti.kernel
@@ -143,14 +141,16 @@ class BoundaryCosts:
         # correlation with dg[::-1] is convolution with dg
         dg = tuple(dg[::-1].astype(np.float32).tolist())
         for y0 in range(0, self.H, self._chunk.shape[0]):
-            self._smooth_y(cost_level1, g, y0)
-            self._occ_features(dg, float(threshold), y0)
+            self._occ_chunk(cost_level1, g, dg, float(threshold), y0)
         self._edt3.run(self.b_occ, (self.H, self.W))
         self._sqrt_normalise(self.b_occ)
 
     # -------------------------------------------------------------------- B_mono
     @ti.kernel
-    def _sobel_edges(self, img: ti.template(), out: ti.template(), threshold: ti.f32):
+    def _edge_features(self, left: ti.template(), right: ti.template(), side: ti.i32,
+                       threshold: ti.f32, dist2: ti.template()):
+        """The Sobel edges of the left (``side`` 0) or right image as features of the
+        distance map ``dist2`` (0 on an edge, INF elsewhere)."""
         height, width = self.extent.height(), self.extent.width()
         for y, x in ti.ndrange(height, width):
             gx = 0.0
@@ -158,17 +158,20 @@ class BoundaryCosts:
             for dy, dx in ti.static(ti.ndrange((-1, 2), (-1, 2))):
                 yy = ti.min(ti.max(y + dy, 0), height - 1)
                 xx = ti.min(ti.max(x + dx, 0), width - 1)
-                p = img[yy, xx]
+                p = left[yy, xx]
+                if side == 1:
+                    p = right[yy, xx]
                 grey = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
                 wx = ti.static(dx * (2 - abs(dy)))
                 wy = ti.static(dy * (2 - abs(dx)))
                 gx += wx * grey
                 gy += wy * grey
             mag = ti.sqrt(gx * gx + gy * gy) / 8.0
-            out[y, x] = 0.0 if mag > threshold else INF
+            dist2[y, x, 0] = 0.0 if mag > threshold else INF
 
     @ti.kernel
-    def _edge_score(self, dist2: ti.template(), out: ti.template()):
+    def _edge_score(self, dist2: ti.template(), side: ti.i32):
+        """e_L (``side`` 0) or e_R from the squared distances to the edges."""
         self._max[None] = 0.0
         height, width = self.extent.height(), self.extent.width()
         for y, x in ti.ndrange(height, width):
@@ -180,20 +183,17 @@ class BoundaryCosts:
             e = 0.0
             if d2 < INF * 0.5:
                 e = 0.5 * (1.0 - ti.sqrt(d2) / m) if m > 0 else 0.5
-            out[y, x] = e
+            if side == 0:
+                self.edge_left[y, x] = e
+            else:
+                self.edge_right[y, x] = e
 
     def build_mono(self, left, right, threshold):
         """Edge scores e_L, e_R of the two images (``(H, W)`` vector fields in [0, 1])."""
-        for img, out in ((left, self.edge_left), (right, self.edge_right)):
-            self._sobel_edges(img, out, float(threshold))
-            self._copy_to_3d(out, self._dist2)
+        for side in (0, 1):
+            self._edge_features(left, right, side, float(threshold), self._dist2)
             self._edt2.run(self._dist2, (self.H, self.W))
-            self._edge_score(self._dist2, out)
-
-    @ti.kernel
-    def _copy_to_3d(self, src: ti.template(), dst: ti.template()):
-        for y, x in ti.ndrange(self.extent.height(), self.extent.width()):
-            dst[y, x, 0] = src[y, x]
+            self._edge_score(self._dist2, side)
 
     def build(self, cost_level1, left, right, params):
         """Everything B needs, once per solve."""
