@@ -333,18 +333,16 @@ class Solver:
         t = self._stage("boundary", t)
         reinit = self.iteration % p.reinit_every == 0
         # the median's last pass also writes D (Eq. 3) from the new phi
-        ls.evolve(hier.matching_cost, self.c_max, self.shapes, self.occ, p, reinit)
+        flipped, area = (int(v) for v in ls.evolve(hier.matching_cost, self.c_max, self.shapes,
+                                                    self.occ, p, reinit))
         if reinit and p.stop_shift > 0 and p.stop_surface > 0:  # since the last re-init
-            self.shapes.moved(ls.phi)
-            self._moved = max(self._moved, 2.0 * float(self.pool.read(self.shapes.change)))
+            self._moved = max(self._moved, 2.0 * float(self.shapes.moved(ls.phi)))
         t = self._stage("levelset", t)
-        flipped, area = int(self.pool.read(ls.flipped)), int(self.pool.read(ls.area))
         seconds = time.perf_counter() - t_iter
         self._t_loop += seconds
         if self._rule.is_window_end(self.iteration):
-            ls.net_change()
-            self._shift = (int(self.pool.read(ls.changed))
-                           / max(int(self.pool.read(ls.boundary)), 1))
+            changed, boundary = (int(v) for v in ls.net_change())
+            self._shift = changed / max(boundary, 1)
             self._surface, self._moved = self._moved, 0.0
             self._rule.record(self._shift, self._surface)
         stats = dict(iteration=self.iteration, flipped=flipped, boundary_shift=self._shift,

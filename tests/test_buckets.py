@@ -153,7 +153,7 @@ print(json.dumps(entries))
 
 #: Kernels of the script that compile once per size bucket, each launched once per size.
 BUCKET_KERNELS = ("_bucket_median", "_bucket_census", "_derivatives", "fit",
-                  "refresh_phi_plus", "render_left", "_features", "_signed", "net_change",
+                  "refresh_phi_plus", "render_left", "_distance_step", "net_change",
                   "_pass")
 
 

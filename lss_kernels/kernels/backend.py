@@ -272,54 +272,62 @@ def _element(f: ti.template(), offset: ti.template(), i):
 
 
 @ti.func
-def _count(f: ti.template()):
-    n = 1
-    for a in ti.static(range(len(f.shape))):
-        n *= f.shape[a]
-    return n
+def _get(f: ti.template(), offset: ti.template(), i, out: ti.template()):
+    """Element ``i`` (row-major) of ``f`` into row ``i`` of ``out``, as float64."""
+    if ti.static(len(f.shape) == 0):
+        if ti.static(isinstance(f, ti.MatrixField)):
+            for c in ti.static(range(f.n)):
+                out[i, c] = ti.cast(f[None][c], ti.f64)
+        else:
+            out[i, 0] = ti.cast(f[None], ti.f64)
+    else:
+        I = _element(f, offset, i)
+        if ti.static(isinstance(f, ti.MatrixField)):
+            for c in ti.static(range(f.n)):
+                out[i, c] = ti.cast(f[I][c], ti.f64)
+        else:
+            out[i, 0] = ti.cast(f[I], ti.f64)
 
 
-@ti.kernel
-def _host_read(fields: ti.template(), offsets: ti.template(), which: ti.i32,
-               out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-    # one loop per field, of length 0 but for the one asked for: one kernel reads them all
-    for k in ti.static(range(len(fields))):
-        f = ti.static(fields[k])
-        for i in range(ti.select(which == k, _count(f), 0)):
-            if ti.static(len(f.shape) == 0):
-                if ti.static(isinstance(f, ti.MatrixField)):
-                    for c in ti.static(range(f.n)):
-                        out[i, c] = ti.cast(f[None][c], ti.f64)
-                else:
-                    out[i, 0] = ti.cast(f[None], ti.f64)
-            else:
-                I = _element(f, offsets[k], i)
-                if ti.static(isinstance(f, ti.MatrixField)):
-                    for c in ti.static(range(f.n)):
-                        out[i, c] = ti.cast(f[I][c], ti.f64)
-                else:
-                    out[i, 0] = ti.cast(f[I], ti.f64)
+@ti.func
+def _put(f: ti.template(), offset: ti.template(), i, src: ti.template()):
+    """Row ``i`` of ``src`` into element ``i`` (row-major) of ``f``, cast to its type."""
+    if ti.static(len(f.shape) == 0):
+        if ti.static(isinstance(f, ti.MatrixField)):
+            for c in ti.static(range(f.n)):
+                f[None][c] = ti.cast(src[i, c], f.dtype)
+        else:
+            f[None] = ti.cast(src[i, 0], f.dtype)
+    else:
+        I = _element(f, offset, i)
+        if ti.static(isinstance(f, ti.MatrixField)):
+            for c in ti.static(range(f.n)):
+                f[I][c] = ti.cast(src[i, c], f.dtype)
+        else:
+            f[I] = ti.cast(src[i, 0], f.dtype)
 
 
-@ti.kernel
-def _host_write(fields: ti.template(), offsets: ti.template(), which: ti.i32,
-                src: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-    for k in ti.static(range(len(fields))):
-        f = ti.static(fields[k])
-        for i in range(ti.select(which == k, _count(f), 0)):
-            if ti.static(len(f.shape) == 0):
-                if ti.static(isinstance(f, ti.MatrixField)):
-                    for c in ti.static(range(f.n)):
-                        f[None][c] = ti.cast(src[i, c], f.dtype)
-                else:
-                    f[None] = ti.cast(src[i, 0], f.dtype)
-            else:
-                I = _element(f, offsets[k], i)
-                if ti.static(isinstance(f, ti.MatrixField)):
-                    for c in ti.static(range(f.n)):
-                        f[I][c] = ti.cast(src[i, c], f.dtype)
-                else:
-                    f[I] = ti.cast(src[i, 0], f.dtype)
+@ti.data_oriented
+class _Transfer:
+    """The two kernels that move any field of a pool (and of its annexes) to or from the
+    host: one loop over the asked-for field's elements, which branches on the field (the
+    same branch at every element).  The fields are attributes read with ``ti.static``, not
+    template arguments, which Taichi would hash at every launch."""
+
+    def __init__(self, fields, offsets):
+        self.fields, self.offsets = tuple(fields), tuple(offsets)
+
+    @ti.kernel
+    def read(self, which: ti.i32, n: ti.i32, out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+        for k in ti.static(range(len(self.fields))):
+            for i in range(ti.select(which == k, n, 0)):
+                _get(self.fields[k], self.offsets[k], i, out)
+
+    @ti.kernel
+    def write(self, which: ti.i32, n: ti.i32, src: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+        for k in ti.static(range(len(self.fields))):
+            for i in range(ti.select(which == k, n, 0)):
+                _put(self.fields[k], self.offsets[k], i, src)
 
 
 def _numpy_dtype(dtype):
@@ -402,6 +410,8 @@ class FieldPool:
         self._bytes = 0
         self.fields = []
         self._offsets = []
+        self._root = None           # the pool an annex belongs to
+        self._io = None
         self.generation = None
         self._annexes = []
 
@@ -413,8 +423,10 @@ class FieldPool:
     def annex(self):
         """A pool of its own trees that this pool finalises (after its own), zeroes and
         destroys with itself."""
-        self._annexes.append(FieldPool())
-        return self._annexes[-1]
+        annex = FieldPool()
+        annex._root = self
+        self._annexes.append(annex)
+        return annex
 
     def extent(self, height, width):
         """The pool's :class:`Extent` of ``height x width`` images (one per size, shared by
@@ -500,39 +512,48 @@ class FieldPool:
         for annex in self._annexes:
             annex.zero()
 
-    def _owner(self, f):
-        """The pool (this one or an annex) that holds ``f``, and ``f``'s index in it."""
-        for part in (self, *self._annexes):
-            for k, g in enumerate(part.fields):
-                if g is f:
-                    return part, k
-        raise ValueError("FieldPool: the field is not one of this pool's")
+    def _transfer(self):
+        """The :class:`_Transfer` of this pool's fields and its annexes' (one for all: made
+        on first use, once every tree is finalised)."""
+        if self._io is None:
+            parts = (self, *self._annexes)
+            self._io = _Transfer([f for p in parts for f in p.fields],
+                                 [o for p in parts for o in p._offsets])
+            self._io_index = {id(f): k for k, f in enumerate(self._io.fields)}
+        return self._io
+
+    def _index(self, f):
+        root = self._root if self._root is not None else self
+        io = root._transfer()
+        k = root._io_index.get(id(f))
+        if k is None:
+            raise ValueError("FieldPool: the field is not one of this pool's")
+        return io, k
 
     def read(self, f):
         """The whole of field ``f`` (this pool's or an annex's) as a numpy array of its
         shape (vector fields: one more axis) and dtype.  One kernel reads every field of a
-        pool (``to_numpy`` compiles one per field)."""
-        part, k = self._owner(f)
+        pool and its annexes (``to_numpy`` compiles one per field)."""
+        io, k = self._index(f)
         n = int(np.prod(f.shape, dtype=np.int64))
         m = f.n if isinstance(f, ti.MatrixField) else 1
-        out = np.zeros((max(n, 1), m), np.float64)
-        _host_read(tuple(part.fields), tuple(part._offsets), k, out)
+        out = np.zeros((n, m), np.float64)
+        io.read(k, n, out)
         shape = tuple(f.shape) + ((m,) if isinstance(f, ti.MatrixField) else ())
         return out.reshape(shape).astype(_numpy_dtype(f.dtype))
 
     def write(self, f, array):
         """Write ``array`` (``f``'s shape, vector fields with one more axis) into field
         ``f`` (this pool's or an annex's): the one kernel that writes every field of a
-        pool."""
-        part, k = self._owner(f)
+        pool and its annexes."""
+        io, k = self._index(f)
         m = f.n if isinstance(f, ti.MatrixField) else 1
         src = np.asarray(array)
         expected = tuple(f.shape) + ((m,) if isinstance(f, ti.MatrixField) else ())
         if src.shape != expected:
             raise ValueError(f"FieldPool.write: expected an array of shape {expected}, "
                              f"got {src.shape}")
-        _host_write(tuple(part.fields), tuple(part._offsets), k,
-                    np.ascontiguousarray(src.reshape(-1, m), dtype=np.float64))
+        io.write(k, src.size // m, np.ascontiguousarray(src.reshape(-1, m), dtype=np.float64))
 
     def destroy(self):
         """Free the pool's trees; a pool of an earlier :func:`generation` only drops them."""
@@ -545,6 +566,7 @@ class FieldPool:
         self._trees = []
         self._shared = {}
         self._loaders = []
+        self._io = None
         # Taichi lists the vector fields declared since its last kernel compile and reads
         # their shapes at the next one: a pool destroyed before any kernel ran would leave
         # freed SNodes in that list, and the next compile would crash the process

@@ -196,7 +196,7 @@ class InitialRegion:
     # for its own ``op`` only (the others' loops have no rows), with the pass's arguments.
     @ti.kernel
     def _region_pass(self, op: ti.i32, i0: ti.i32, i1: ti.i32, i2: ti.i32, f0: ti.f32,
-                     f1: ti.f32, f2: ti.f32, c: ti.types.vector(6, ti.f32)):
+                     f1: ti.f32, f2: ti.f32, c: ti.types.vector(6, ti.f32)) -> ti.i32:
         self.changed[None] = 0
         self._mark_near(ti.select(op == _MARK_NEAR, self.H, 0), i0, f0)
         self._keep_above(ti.select(op == _KEEP_ABOVE, self.H, 0), c, f0)
@@ -206,9 +206,12 @@ class InitialRegion:
         self._bridge(ti.select(op == _GROW and i2 > 0, self.H, 0), f0, f1, i2)
         self._erode(ti.select(op == _OPEN, self.H, 0), i0)
         self._dilate(ti.select(op == _OPEN, self.H, 0), i1, i2)
+        return self.changed[None]
 
     def _launch(self, op, i0=0, i1=0, i2=0, f0=0.0, f1=0.0, f2=0.0, c=(0.0,) * 6):
-        self._region_pass(op, int(i0), int(i1), int(i2), float(f0), float(f1), float(f2),
+        """Run pass ``op``; returns whether it changed a label (:meth:`propagate`,
+        :meth:`grow`)."""
+        return self._region_pass(op, int(i0), int(i1), int(i2), float(f0), float(f1), float(f2),
                           np.asarray(c, np.float32))
 
     def mark_near(self, window, contrast):
@@ -226,7 +229,7 @@ class InitialRegion:
         """Each labelled pixel takes the largest label of its run along its row (a sweep each
         way, a thread per row), then along its column: until stable, every 4-connected
         component gets its largest label."""
-        self._launch(_PROPAGATE)
+        return self._launch(_PROPAGATE)
 
     def seed(self, sy, sx, seed_d=None, keep_near=False):
         """The region is pixel ``(sy, sx)`` alone; with ``keep_near``, first the pixels that
@@ -239,7 +242,7 @@ class InitialRegion:
         """Pixels next to the region whose d-bar is close to the seed's and the neighbour's
         join it; then, with ``gap`` > 0, the region is carried across thin layers in front
         of it (:meth:`_bridge`)."""
-        self._launch(_GROW, i2=gap, f0=seed_d, f1=tolerance, f2=step)
+        return self._launch(_GROW, i2=gap, f0=seed_d, f1=tolerance, f2=step)
 
     def open(self, erode, radius, left=None):
         """``inside``: the labelled pixels whose whole ``2 erode + 1`` square (in the image)
@@ -379,8 +382,7 @@ class InitialRegion:
         """Launch a pass (:meth:`propagate`, :meth:`grow`) until it changes nothing; returns
         the rounds it took."""
         for rounds in range(1, MAX_ROUNDS + 1):
-            launch()
-            if self.pool.read(self.changed) == 0:
+            if launch() == 0:
                 return rounds
         return MAX_ROUNDS
 

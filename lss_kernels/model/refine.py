@@ -158,11 +158,12 @@ class LayerRefinement:
     # ------------------------------------------------------------------ the passes
     @ti.kernel
     def _begin(self, surface: ti.template(), foreground: ti.template(),
-               occlusion: ti.template(), d_max: ti.f32, first: ti.i32, R: ti.i32):
+               occlusion: ti.template(), d_max: ti.f32, first: ti.i32,
+               R: ti.i32) -> ti.types.vector(2, ti.i32):
         """A pass's candidate centres and their span, no costs yet; on the ``first`` pass
         the layers, and the surface clamped to the searched range ``[0, d_max]`` (a
         quadratic can leave it; its candidates would then lie outside the sweep),
-        non-finite values as 0."""
+        non-finite values as 0.  Returns the span."""
         self.span[0] = 1 << 30
         self.span[1] = -(1 << 30)
         for y, x in ti.ndrange((0, ti.select(first == 1, self.extent.height(), 0)),
@@ -181,6 +182,7 @@ class LayerRefinement:
             ti.atomic_max(self.span[1], b)
             for k in range(2 * R + 1):
                 self.costs[y, x, k] = NO_COST
+        return ti.Vector([self.span[0], self.span[1]])
 
     @ti.func
     def _match(self, left: ti.template(), right: ti.template(), y, x, d):
@@ -290,8 +292,8 @@ class LayerRefinement:
         ``surface``."""
         self.matching.setup(left, right)
         for i, (R, window, smoothing) in enumerate(self.passes):
-            self._begin(surface, foreground, occlusion, float(d_max), int(i == 0), R)
-            low, high = (int(v) for v in self.extent.pool.read(self.span))
+            low, high = (int(v) for v in self._begin(surface, foreground, occlusion,
+                                                     float(d_max), int(i == 0), R))
             for d in range(max(low - R, 0), min(high + R, int(d_max)) + 1):
                 self._sweep(left, right, d, R, window)
             self._finish(R, self.ratio, smoothing, WIDE_WEIGHT, float(d_max), self.support)

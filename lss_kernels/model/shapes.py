@@ -122,11 +122,12 @@ class GlobalShapes:
         return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
 
     @ti.kernel
-    def moved(self, phi: ti.template()):
+    def moved(self, phi: ti.template()) -> ti.f32:
         """How far the shapes have moved since the last call, in cyclopean pixels: ``change``
         is the largest ``|Theta_j - reference_j|`` over the image, each pixel measured on its
         own layer's shape (Theta_1 where ``phi > 0``, else Theta_2); then ``reference`` <-
-        Theta (the stopping rule's second test, :mod:`lss_kernels.stopping`)."""
+        Theta (the stopping rule's second test, :mod:`lss_kernels.stopping`); returns
+        ``change``."""
         self.change[None] = 0.0
         for y, x in phi:
             if y < self.extent.height() and x < self.extent.width():
@@ -138,6 +139,7 @@ class GlobalShapes:
                 ti.atomic_max(self.change[None], ti.abs(dz))
         for j, a in self.theta:
             self.reference[j, a] = self.theta[j, a]
+        return self.change[None]
 
     @ti.func
     def _from_pixels(self, weights: ti.template(), target: ti.template(), out: ti.template()):
