@@ -115,23 +115,25 @@ class BoundaryCosts:
                 s = self._correlate(self._chunk, dtaps, r, x, k, 1)
                 self.b_occ[y0 + r, x, k] = 0.0 if ti.abs(s) > threshold else INF
 
-    @ti.kernel
-    def _sqrt_normalise(self, vol: ti.template()):
+    @ti.func
+    def _sqrt_normalise(self, vol: ti.template(), rows):
         """The ``H x W`` region of ``vol`` (squared distances, in memory order) <- the
-        distances over their largest finite one, 1 where there is none."""
+        distances over their largest finite one, 1 where there is none (``rows``: the
+        image's height, or 0 for nothing)."""
         self._max[None] = 0.0
-        height, width = self.extent.height(), self.extent.width()
-        for y, k, x in ti.ndrange(height, self.C, width):
+        width = self.extent.width()
+        for y, k, x in ti.ndrange(rows, self.C, width):
             if vol[y, x, k] < INF * 0.5:
                 ti.atomic_max(self._max[None], ti.sqrt(vol[y, x, k]))
         m = self._max[None]
-        for y, k, x in ti.ndrange(height, self.C, width):
+        for y, k, x in ti.ndrange(rows, self.C, width):
             v = vol[y, x, k]
             vol[y, x, k] = ti.min(ti.sqrt(v) / m, 1.0) if (m > 0 and v < INF * 0.5) else 1.0
 
-    def build_occ(self, cost_level1, sigma, threshold):
-        """B_occ from the size-3 normalised cost volume (``cost_level1`` may carry a margin;
-        only its in-image part is read)."""
+    def _occ_distances(self, cost_level1, sigma, threshold):
+        """B_occ's squared distances to its features, from the size-3 normalised cost volume
+        (``cost_level1`` may carry a margin; only its in-image part is read); the first of
+        :meth:`_around_transforms` makes them B_occ."""
         g, _, _ = gaussian_taps(sigma, int(math.ceil(4 * sigma)))
         # derivative taps as central differences of the sampled Gaussian (what a discrete
         # gradient of the smoothing kernel gives)
@@ -143,16 +145,30 @@ class BoundaryCosts:
         for y0 in range(0, self.H, self._chunk.shape[0]):
             self._occ_chunk(cost_level1, g, dg, float(threshold), y0)
         self._edt3.run(self.b_occ, (self.H, self.W))
-        self._sqrt_normalise(self.b_occ)
 
     # -------------------------------------------------------------------- B_mono
     @ti.kernel
-    def _edge_features(self, left: ti.template(), right: ti.template(), side: ti.i32,
-                       threshold: ti.f32, dist2: ti.template()):
+    def _around_transforms(self, left: ti.template(), right: ti.template(),
+                           dist2: ti.template(), normalise: ti.i32, score: ti.i32,
+                           features: ti.i32, threshold: ti.f32):
+        """What runs between B's distance transforms, in order: with ``normalise``, B_occ
+        from its transform (:meth:`_sqrt_normalise`); with ``score`` 0 or 1, that side's
+        edge scores from the transform ``dist2`` (:meth:`_edge_score`); with ``features`` 0
+        or 1, that side's edges as the features of the next transform
+        (:meth:`_edge_features`)."""
+        height = self.extent.height()
+        self._sqrt_normalise(self.b_occ, ti.select(normalise == 1, height, 0))
+        self._edge_score(dist2, score, ti.select(score >= 0, height, 0))
+        self._edge_features(left, right, features, threshold, dist2,
+                            ti.select(features >= 0, height, 0))
+
+    @ti.func
+    def _edge_features(self, left: ti.template(), right: ti.template(), side, threshold,
+                       dist2: ti.template(), rows):
         """The Sobel edges of the left (``side`` 0) or right image as features of the
         distance map ``dist2`` (0 on an edge, INF elsewhere)."""
         height, width = self.extent.height(), self.extent.width()
-        for y, x in ti.ndrange(height, width):
+        for y, x in ti.ndrange(rows, width):
             gx = 0.0
             gy = 0.0
             for dy, dx in ti.static(ti.ndrange((-1, 2), (-1, 2))):
@@ -169,16 +185,16 @@ class BoundaryCosts:
             mag = ti.sqrt(gx * gx + gy * gy) / 8.0
             dist2[y, x, 0] = 0.0 if mag > threshold else INF
 
-    @ti.kernel
-    def _edge_score(self, dist2: ti.template(), side: ti.i32):
+    @ti.func
+    def _edge_score(self, dist2: ti.template(), side, rows):
         """e_L (``side`` 0) or e_R from the squared distances to the edges."""
         self._max[None] = 0.0
-        height, width = self.extent.height(), self.extent.width()
-        for y, x in ti.ndrange(height, width):
+        width = self.extent.width()
+        for y, x in ti.ndrange(rows, width):
             if dist2[y, x, 0] < INF * 0.5:
                 ti.atomic_max(self._max[None], ti.sqrt(dist2[y, x, 0]))
         m = self._max[None]
-        for y, x in ti.ndrange(height, width):
+        for y, x in ti.ndrange(rows, width):
             d2 = dist2[y, x, 0]
             e = 0.0
             if d2 < INF * 0.5:
@@ -188,19 +204,18 @@ class BoundaryCosts:
             else:
                 self.edge_right[y, x] = e
 
-    def build_mono(self, left, right, threshold):
-        """Edge scores e_L, e_R of the two images (``(H, W)`` vector fields in [0, 1])."""
-        for side in (0, 1):
-            self._edge_features(left, right, side, float(threshold), self._dist2)
-            self._edt2.run(self._dist2, (self.H, self.W))
-            self._edge_score(self._dist2, side)
-
     def build(self, cost_level1, left, right, params):
-        """Everything B needs, once per solve."""
+        """Everything B needs, once per solve: B_occ, then the edge scores e_L, e_R of the
+        two images (``(H, W)`` vector fields in [0, 1]) for B_mono."""
         self.extent.pool.write(self.alpha, np.array([params.alpha_occ, params.alpha_mono,
                                                      params.alpha_const]))
-        self.build_occ(cost_level1, params.occ_sigma, params.occ_threshold)
-        self.build_mono(left, right, params.mono_threshold)
+        self._occ_distances(cost_level1, params.occ_sigma, params.occ_threshold)
+        t, run = float(params.mono_threshold), self._around_transforms
+        run(left, right, self._dist2, 1, -1, 0, t)    # B_occ; the left image's edges
+        self._edt2.run(self._dist2, (self.H, self.W))
+        run(left, right, self._dist2, 0, 0, 1, t)     # e_L; the right image's edges
+        self._edt2.run(self._dist2, (self.H, self.W))
+        run(left, right, self._dist2, 0, 1, -1, t)    # e_R
 
     # -------------------------------------------------------------------- evaluation
     @ti.func

@@ -465,6 +465,11 @@ class PatchHierarchy:
         """Relay the messages down to the pixels: fills ``precision`` (1/sigma^2) and
         ``consensus_mean`` (d-bar; 0 where no valid patch contains the pixel).  One launch:
         the levels' loops run in order, from the top."""
+        self.down()
+
+    @ti.func
+    def down(self):
+        """:meth:`downward`, for a kernel that runs it with other stages."""
         # the top level has no parent: its relay is just its own messages
         for i in ti.static(range(len(self.levels) - 2, -1, -1)):
             self._down(self.levels[i], self.levels[i + 1], False)

@@ -187,6 +187,11 @@ class LevelSet:
 
     @ti.kernel
     def _derivatives(self, band: ti.f32):
+        self.derive(band)
+
+    @ti.func
+    def derive(self, band):
+        """:meth:`derivatives`, for a kernel that runs it with other stages."""
         self._mark_band(band)
         self.filters.rows(self.phi, (0, 1, 2), self.near_rows, (1,))
         self._columns_curvature()
@@ -251,6 +256,11 @@ class LevelSet:
         """B(x, y, Theta_1(x, y)) and the row pass of its gradient (the column pass runs in
         the Eq. 2 step, which alone needs grad B), in one launch; where the step reads them
         (:meth:`_mark_band`, after :meth:`derivatives`)."""
+        self.boundary_terms(costs, shapes)
+
+    @ti.func
+    def boundary_terms(self, costs: ti.template(), shapes: ti.template()):
+        """:meth:`boundary_weight`, for a kernel that runs it with other stages."""
         self._b_map(costs, shapes)
         self.filters.rows(self.b_map, (0, 1), self.near_rows, ())
 

@@ -264,6 +264,11 @@ class GlobalShapes:
         giving pixel (y, x)'s row weights ``[w_fg, w_bg]`` (0 outside a region), computed
         as the pixels are summed (no weight planes): the solver's Eq. 8 weights, or
         :class:`WeightPlanes`.  One launch: the reduction's levels run in order."""
+        self.fit_func(weights, target)
+
+    @ti.func
+    def fit_func(self, weights: ti.template(), target: ti.template()):
+        """:meth:`fit`, for a kernel that runs it with other stages."""
         self._from_pixels(weights, target, self.tiles[0])
         for i in ti.static(range(1, len(self.tiles))):
             self._from_tiles(self.tiles[i - 1], self.tiles[i], i)
