@@ -294,3 +294,42 @@ def test_an_annex_is_finalised_zeroed_counted_and_destroyed_with_its_pool(ti_arc
     assert extent.size.to_numpy().tolist() == [7, 9]     # the annex's loader ran again
     pool.destroy()
     assert pool._trees == [] and annex._trees == []
+
+
+def test_a_pool_moves_any_field_of_its_own_or_its_annexes_to_and_from_the_host(ti_arch):
+    """FieldPool.read / write (one kernel each for every field of a pool and its annexes)
+    give back exactly what was written, in the field's shape and dtype, as Taichi's own
+    copies do."""
+    import taichi as ti
+    from lss_kernels.kernels.backend import FieldPool
+    pool = FieldPool()
+    rng = np.random.default_rng(1)
+    cases = [(pool.field(ti.f32, (3, 5), bucket=True), rng.standard_normal((3, 5))),
+             (pool.field(ti.i32, (4,)), np.array([-2 ** 31, 7, 2 ** 31 - 1, 0])),
+             (pool.field(ti.i8, (2, 3), volume=True), np.array([[-128, 0, 127], [1, -1, 5]])),
+             (pool.field(ti.f32, ()), np.array(1.0 / 3.0)),
+             (pool.vector(3, ti.f32, (2, 4), bucket=True), rng.random((2, 4, 3))),
+             (pool.vector(2, ti.i32, ()), np.array([3, -4])),
+             (pool.field(ti.f32, (4, 3), offset=(-1, -2)), rng.random((4, 3)))]
+    annex = pool.annex()
+    cases.append((annex.field(ti.u8, (6,), bucket=True), np.arange(250, 256)))
+    pool.finalize()
+    try:
+        for f, values in cases:
+            pool.write(f, values)
+        for f, values in cases:
+            got = pool.read(f)
+            want = f.to_numpy()
+            assert got.dtype == want.dtype and got.shape == want.shape == values.shape
+            np.testing.assert_array_equal(got, want)
+            np.testing.assert_array_equal(got, values.astype(want.dtype))
+        with pytest.raises(ValueError, match="shape"):
+            pool.write(cases[0][0], np.zeros((5, 3)))
+        other = FieldPool()
+        stranger = other.field(ti.f32, (2,))
+        other.finalize()
+        with pytest.raises(ValueError, match="not one of this pool's"):
+            pool.read(stranger)
+        other.destroy()
+    finally:
+        pool.destroy()

@@ -180,7 +180,7 @@ class InitialRegion:
         self.median = MedianFilter(pool, H, W, MEDIAN)
         self.info, self.grown = {}, None
         #: widest layer in front of the object that a point's region is carried across
-        #: (:meth:`bridge`), cyclopean pixels; 0: none (the paper's two layers)
+        #: (:meth:`_bridge`), cyclopean pixels; 0: none (the paper's two layers)
         self.bridge_gap = 0
 
     @ti.kernel
