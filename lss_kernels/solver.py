@@ -156,6 +156,15 @@ class Solver:
             self.initialiser.bridge_gap = BRIDGE_GAP
         self.refinement = (LayerRefinement(pool.annex(), H, W, p.refine_passes, p.refine_ratio,
                                            p.refine_support) if p.refine else None)
+        # what the host reads and writes of the pool (FieldPool.host)
+        h = self.hierarchy
+        pool.host(self.left, self.right, h.consensus_mean, h.precision,
+                  self.occ.disparity_left, self.occ.occlusion_left, self.occ.foreground_left)
+        if self.refinement is not None:
+            r = self.refinement
+            pool.host(r.surface, r.match, r.peak_ratio, r.weight)
+        if self.front is not None:
+            pool.host(self.front.front, self.front.first)
         self.fused = IterationKernels(self.levelset, self.occ, self.hierarchy, self.messages,
                                       self.shapes, self.costs)
         pool.finalize()

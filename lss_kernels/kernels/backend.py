@@ -259,16 +259,16 @@ def _zero_all(fields: ti.template()):
 
 @ti.func
 def _element(f: ti.template(), offset: ti.template(), i):
-    """The index of the ``i``-th element of ``f`` in row-major order (``offset``: the
-    field's first index)."""
+    """The index of the ``i``-th element of ``f`` (1 to 3 axes) in row-major order
+    (``offset``: the field's first index)."""
     shape = ti.static(f.shape)
-    index = ti.Vector([0] * len(shape))
-    rest = i
-    for a in ti.static(range(len(shape))):
-        axis = ti.static(len(shape) - 1 - a)
-        index[axis] = rest % shape[axis] + offset[axis]
-        rest //= shape[axis]
-    return index
+    if ti.static(len(shape) == 1):
+        return ti.Vector([i + offset[0]])
+    elif ti.static(len(shape) == 2):
+        return ti.Vector([i // shape[1] + offset[0], i % shape[1] + offset[1]])
+    else:
+        return ti.Vector([i // (shape[1] * shape[2]) + offset[0],
+                          i // shape[2] % shape[1] + offset[1], i % shape[2] + offset[2]])
 
 
 @ti.func
@@ -309,10 +309,10 @@ def _put(f: ti.template(), offset: ti.template(), i, src: ti.template()):
 
 @ti.data_oriented
 class _Transfer:
-    """The two kernels that move any field of a pool (and of its annexes) to or from the
-    host: one loop over the asked-for field's elements, which branches on the field (the
-    same branch at every element).  The fields are attributes read with ``ti.static``, not
-    template arguments, which Taichi would hash at every launch."""
+    """The two kernels that move the host's fields of a pool (and of its annexes) to or from
+    the host: a loop per field, of no elements but for the field asked for.  The fields are
+    attributes read with ``ti.static``, not template arguments, which Taichi would hash at
+    every launch."""
 
     def __init__(self, fields, offsets):
         self.fields, self.offsets = tuple(fields), tuple(offsets)
@@ -410,6 +410,7 @@ class FieldPool:
         self._bytes = 0
         self.fields = []
         self._offsets = []
+        self._host = []             # the fields that read and write move (see host)
         self._root = None           # the pool an annex belongs to
         self._io = None
         self.generation = None
@@ -512,29 +513,50 @@ class FieldPool:
         for annex in self._annexes:
             annex.zero()
 
+    def host(self, *fields):
+        """Mark fields of this pool (or an annex) that the host reads or writes during a
+        solve: :meth:`read` and :meth:`write` move them with one kernel each for all of
+        them (``to_numpy`` and ``from_numpy`` compile one per field).  Before the first
+        transfer (the pool's loaders run them in :meth:`finalize`)."""
+        if self._io is not None:
+            raise RuntimeError("FieldPool.host: mark fields before the first transfer")
+        for f in fields:
+            self._host.append(f)
+
     def _transfer(self):
-        """The :class:`_Transfer` of this pool's fields and its annexes' (one for all: made
-        on first use, once every tree is finalised)."""
+        """The :class:`_Transfer` of this pool's host fields and its annexes' (one for all:
+        made on first use, once every tree is finalised)."""
         if self._io is None:
             parts = (self, *self._annexes)
-            self._io = _Transfer([f for p in parts for f in p.fields],
-                                 [o for p in parts for o in p._offsets])
-            self._io_index = {id(f): k for k, f in enumerate(self._io.fields)}
+            fields, offsets = [], []
+            for p in parts:
+                for f, o in zip(p.fields, p._offsets):
+                    if any(f is g for q in parts for g in q._host):
+                        fields.append(f)
+                        offsets.append(o)
+            self._io = _Transfer(fields, offsets)
+            self._io_index = {id(f): k for k, f in enumerate(fields)}
         return self._io
 
     def _index(self, f):
+        """The transfer of ``f`` and its index there; ``(None, None)`` for a field of the
+        pool that is not a host field."""
         root = self._root if self._root is not None else self
         io = root._transfer()
         k = root._io_index.get(id(f))
         if k is None:
-            raise ValueError("FieldPool: the field is not one of this pool's")
+            if not any(f is g for p in (root, *root._annexes) for g in p.fields):
+                raise ValueError("FieldPool: the field is not one of this pool's")
+            return None, None
         return io, k
 
     def read(self, f):
         """The whole of field ``f`` (this pool's or an annex's) as a numpy array of its
-        shape (vector fields: one more axis) and dtype.  One kernel reads every field of a
-        pool and its annexes (``to_numpy`` compiles one per field)."""
+        shape (vector fields: one more axis) and dtype: through the pool's one read kernel
+        for a :meth:`host` field, else Taichi's ``to_numpy``."""
         io, k = self._index(f)
+        if io is None:
+            return f.to_numpy()
         n = int(np.prod(f.shape, dtype=np.int64))
         m = f.n if isinstance(f, ti.MatrixField) else 1
         out = np.zeros((n, m), np.float64)
@@ -544,8 +566,8 @@ class FieldPool:
 
     def write(self, f, array):
         """Write ``array`` (``f``'s shape, vector fields with one more axis) into field
-        ``f`` (this pool's or an annex's): the one kernel that writes every field of a
-        pool and its annexes."""
+        ``f`` (this pool's or an annex's): through the pool's one write kernel for a
+        :meth:`host` field, else Taichi's ``from_numpy``."""
         io, k = self._index(f)
         m = f.n if isinstance(f, ti.MatrixField) else 1
         src = np.asarray(array)
@@ -553,6 +575,9 @@ class FieldPool:
         if src.shape != expected:
             raise ValueError(f"FieldPool.write: expected an array of shape {expected}, "
                              f"got {src.shape}")
+        if io is None:
+            f.from_numpy(np.array(src, dtype=_numpy_dtype(f.dtype), order="C"))
+            return
         io.write(k, src.size // m, np.ascontiguousarray(src.reshape(-1, m), dtype=np.float64))
 
     def destroy(self):
@@ -603,6 +628,7 @@ class Extent:
         self.bucket = bucket_shape(self.H, self.W)
         self.pool = pool
         self.size = pool.field(ti.i32, (2,), bucket=True)
+        pool.host(self.size)
         pool.on_load(self.load)
 
     def load(self):

@@ -48,6 +48,7 @@ class BoundaryCosts:
         self.edge_right = pool.field(ti.f32, (H, W), bucket=True)
         self._max = pool.field(ti.f32, (), bucket=True)
         self.alpha = pool.vector(3, ti.f32, (), bucket=True)
+        pool.host(self.alpha)
         # scratch, kept for the solver's life: destroying an SNode tree makes Taichi drop
         # every compiled kernel, which a reset solver would then compile again
         rows = max(1, -(-H * min(C, CHUNK) // C))               # B_occ, a block of rows at a time

@@ -177,6 +177,7 @@ class InitialRegion:
         self.label = pool.field(ti.i32, (H, W))     # region id, -1 outside
         self.inside = pool.field(ti.i32, (H, W))    # a region before widening or opening
         self.changed = pool.field(ti.i32, ())
+        pool.host(self.d, self.label)
         self.median = MedianFilter(pool, H, W, MEDIAN)
         self.info, self.grown = {}, None
         #: widest layer in front of the object that a point's region is carried across

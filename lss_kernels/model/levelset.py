@@ -121,6 +121,7 @@ class LevelSet:
         self.boundary = pool.field(ti.i32, (), bucket=True)
         self.reference_sign = pool.field(ti.i8, (H, W), bucket=True)
         self.area = pool.field(ti.i32, (), bucket=True)
+        pool.host(self.d_limit, self.phi, self.phi_next, self.D)   # start(), outputs
         self.curvature_clip = float(params.curvature_clip)
         self.boundary_clip = float(params.boundary_clip)
         self.scale = float(params.phi_scale)

@@ -69,6 +69,7 @@ class Messages:
                           for _ in self.levels] if self.ambiguity > 0 else [])
         self._cached = None       # (beta, the hierarchy's cost_version) of the cache
         self._distinct_version = None
+        self.extent.pool.host(*(level.key for level in self.levels))   # emptied by prepare
 
     @ti.func
     def _refine(self, cost: ti.template(), y, x, arg):

@@ -71,6 +71,7 @@ class GlobalShapes:
         # the shapes at the last call of moved() and how far they have moved since
         self.reference = field(ti.f32, (2, NB))
         self.change = field(ti.f32, ())
+        pool.host(self.frame, self.theta)
         self.updated = field(ti.i32, (2,))   # the last fit changed the shape
         self.rows = field(ti.f32, (2,))
         # reduction levels: tiles of TILE x TILE children until one cell is left

@@ -80,6 +80,7 @@ class BackgroundSweep:
         # at the fitted Theta_2 (k = C) and the pixels' count (k = C + 1)
         self.rows = pool.field(ti.f32, (Hb, self.C + 2), volume=True)
         self.totals = pool.field(ti.f32, (self.C + 2,), volume=True)
+        pool.host(self.totals)
 
     @ti.kernel
     def standardise(self, cost: ti.template()):
