@@ -254,12 +254,13 @@ print(json.dumps(added))
 """
 
 #: The kernels of a solve that compile once per image size (see
-#: lss_kernels.kernels.backend.Extent): they keep the float code of one size.  The second
-#: list: those of the start's region (model/init.py, here an ellipse read as its box), whose
-#: fields have the image's own size, and Taichi's copy of such a field to numpy.
-PER_SIZE_KERNELS = sorted(["_cost_from_children", "_ray_cast", "upward"]
-                          + ["_sort", "_store", "grow", "keep_near", "load", "mark_near",
-                             "seed", "tensor_to_ext_arr"])
+#: lss_kernels.kernels.backend.Extent): they keep the float code of one size (the set-up's
+#: volumes, whose sums of children do; the ray cast, with B in the iteration's kernel; the
+#: upward pass).  The second list: those of the start's region (model/init.py, here an
+#: ellipse read as its box), whose fields have the image's own size, and the pool's transfer
+#: kernels, which move such fields.
+PER_SIZE_KERNELS = sorted(["_build_costs", "geometry", "upward"]
+                          + ["_region_pass", "_sort", "_store", "load", "read", "write"])
 
 
 @pytest.mark.slow
