@@ -335,3 +335,22 @@ def test_a_pool_moves_any_field_of_its_own_or_its_annexes_to_and_from_the_host(t
         other.destroy()
     finally:
         pool.destroy()
+
+
+def test_a_field_marked_for_the_host_after_a_transfer_is_moved_by_new_kernels(ti_arch):
+    import taichi as ti
+    from lss_kernels.kernels.backend import FieldPool
+    pool = FieldPool()
+    early, late = pool.field(ti.f32, (2, 3), bucket=True), pool.field(ti.i32, (4,))
+    pool.host(early)
+    pool.finalize()
+    try:
+        pool.write(early, np.full((2, 3), 1.5))
+        first = pool._io
+        pool.host(late)
+        pool.write(late, np.arange(4))
+        assert pool._io is not first and pool._io_index[id(late)] is not None
+        np.testing.assert_array_equal(pool.read(late), np.arange(4))
+        np.testing.assert_array_equal(pool.read(early), np.full((2, 3), 1.5, np.float32))
+    finally:
+        pool.destroy()

@@ -516,12 +516,14 @@ class FieldPool:
     def host(self, *fields):
         """Mark fields of this pool (or an annex) that the host reads or writes during a
         solve: :meth:`read` and :meth:`write` move them with one kernel each for all of
-        them (``to_numpy`` and ``from_numpy`` compile one per field).  Before the first
-        transfer (the pool's loaders run them in :meth:`finalize`)."""
-        if self._io is not None:
-            raise RuntimeError("FieldPool.host: mark fields before the first transfer")
+        them (``to_numpy`` and ``from_numpy`` compile one per field).  Mark them before
+        :meth:`finalize` (whose loaders transfer): a field marked after the first transfer
+        makes the pool compile its transfer kernels again."""
+        root = self._root if self._root is not None else self
         for f in fields:
             self._host.append(f)
+            if root._io is not None and id(f) not in root._io_index:
+                root._io = None
 
     def _transfer(self):
         """The :class:`_Transfer` of this pool's host fields and its annexes' (one for all:
