@@ -33,6 +33,7 @@ from .model.costs import BoundaryCosts
 from .model.front import REACH as FRONT_REACH, FrontLayer
 from .model.hierarchy import PatchHierarchy
 from .model.init import InitialRegion
+from .model.iteration import IterationKernels
 from .model.layers import FRONT, front_in_left_view, occlusion_by_layers
 from .model.levelset import LevelSet
 from .model.matching import MatchingCost
@@ -57,7 +58,8 @@ BRIDGE_GAP = 16
 
 #: What a solver holds per disparity grid (:meth:`Solver._use`).
 _GRID = ("c_max", "pool", "extent", "left", "right", "matching", "hierarchy", "messages",
-         "costs", "shapes", "sweep", "initialiser", "occ", "levelset", "refinement", "front")
+         "costs", "shapes", "sweep", "initialiser", "occ", "levelset", "refinement", "front",
+         "fused")
 
 
 @ti.data_oriented
@@ -154,6 +156,17 @@ class Solver:
             self.initialiser.bridge_gap = BRIDGE_GAP
         self.refinement = (LayerRefinement(pool.annex(), H, W, p.refine_passes, p.refine_ratio,
                                            p.refine_support) if p.refine else None)
+        # what the host reads and writes of the pool (FieldPool.host)
+        h = self.hierarchy
+        pool.host(self.left, self.right, h.consensus_mean, h.precision,
+                  self.occ.disparity_left, self.occ.occlusion_left, self.occ.foreground_left)
+        if self.refinement is not None:
+            r = self.refinement
+            pool.host(r.surface, r.match, r.peak_ratio, r.weight)
+        if self.front is not None:
+            pool.host(self.front.front, self.front.first)
+        self.fused = IterationKernels(self.levelset, self.occ, self.hierarchy, self.messages,
+                                      self.shapes, self.costs)
         pool.finalize()
         self.levelset.setup()
         self.costs.setup(self.levelset.distance, self.levelset.distance_map)
@@ -225,8 +238,8 @@ class Solver:
         image fields, and its matching costs."""
         self.shift = shift
         model_left, model_right = model_pair(left, right, shift)
-        self.left.from_numpy(self.extent.padded(model_left))
-        self.right.from_numpy(self.extent.padded(model_right))
+        self.pool.write(self.left, self.extent.padded(model_left))
+        self.pool.write(self.right, self.extent.padded(model_right))
         self.matching.setup(self.left, self.right)
         self.hierarchy.build_costs(self.matching, self.left, self.right)
 
@@ -250,8 +263,7 @@ class Solver:
 
     def _first_consensus(self):
         """The consensus (Eq. 7) of messages with no prior (Eq. 5), every patch valid."""
-        self.messages.run(0.0, False, False)
-        self.hierarchy.downward()
+        self.fused.consensus(self.messages.prepare(0.0, False, False), 0)
 
     # ------------------------------------------------------------------ small kernels
     @ti.func
@@ -303,15 +315,24 @@ class Solver:
         self.iteration += 1
         first = self.iteration == 1
         ls, hier = self.levelset, self.hierarchy
-        ls.derivatives()
-        self.occ.refresh_phi_plus(ls.phi)
+        # without profiling, the stages with nothing on the host between them run as one
+        # kernel each (model/iteration.py); profiling times them one by one
+        if self.profile:
+            ls.derivatives()
+            self.occ.refresh_phi_plus(ls.phi)
+        else:
+            self.fused.derivatives(ls.band)
         if not first:
             hier.upward(ls.D, ls.phi, self.occ.phi_plus)
         t = self._stage("upward", t)
-        self.messages.run(p.beta / self.c_max, not first, not first)
-        t = self._stage("messages", t)
-        hier.downward()
-        t = self._stage("downward", t)
+        if self.profile:
+            self.messages.run(p.beta / self.c_max, not first, not first)
+            t = self._stage("messages", t)
+            hier.downward()
+            t = self._stage("downward", t)
+        else:
+            self.fused.consensus(self.messages.prepare(p.beta / self.c_max, not first,
+                                                       not first), int(not first))
         self.shapes.fit(self, hier.consensus_mean)
         plane = self.sweep.run(self.iteration, p, hier.matching_cost, self.shapes, ls.phi,
                                self.occ.phi_plus, hier.consensus_mean)
@@ -319,23 +340,25 @@ class Solver:
             self.front.update(hier.matching_cost, self.c_max, self.shapes, ls.phi,
                               -FRONT_REACH * p.phi_scale, 0.5 * p.front_margin)
         t = self._stage("shapes", t)
-        self.occ.compute(self.shapes, ls.phi_x, 1)
-        t = self._stage("occlusion", t)
-        ls.boundary_weight(self.costs, self.shapes)
-        t = self._stage("boundary", t)
+        if self.profile:
+            self.occ.compute(self.shapes, ls.phi_x, 1)
+            t = self._stage("occlusion", t)
+            ls.boundary_weight(self.costs, self.shapes)
+            t = self._stage("boundary", t)
+        else:
+            self.fused.geometry(1, 2.0 * self.c_max)
         reinit = self.iteration % p.reinit_every == 0
         # the median's last pass also writes D (Eq. 3) from the new phi
-        ls.evolve(hier.matching_cost, self.c_max, self.shapes, self.occ, p, reinit)
+        flipped, area = (int(v) for v in ls.evolve(hier.matching_cost, self.c_max, self.shapes,
+                                                    self.occ, p, reinit))
         if reinit and p.stop_shift > 0 and p.stop_surface > 0:  # since the last re-init
-            self.shapes.moved(ls.phi)
-            self._moved = max(self._moved, 2.0 * float(self.shapes.change[None]))
+            self._moved = max(self._moved, 2.0 * float(self.shapes.moved(ls.phi)))
         t = self._stage("levelset", t)
-        flipped, area = int(ls.flipped[None]), int(ls.area[None])
         seconds = time.perf_counter() - t_iter
         self._t_loop += seconds
         if self._rule.is_window_end(self.iteration):
-            ls.net_change()
-            self._shift = int(ls.changed[None]) / max(int(ls.boundary[None]), 1)
+            changed, boundary = (int(v) for v in ls.net_change())
+            self._shift = changed / max(boundary, 1)
             self._surface, self._moved = self._moved, 0.0
             self._rule.record(self._shift, self._surface)
         stats = dict(iteration=self.iteration, flipped=flipped, boundary_shift=self._shift,

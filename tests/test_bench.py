@@ -288,3 +288,25 @@ def test_scene_times_against_a_base_alternates_the_sides_and_compares_again_seco
     assert lines[4] == "| a | 3.00 | 1.50 | 2.00 | 100 | 40 | 0.800 | 0.900 |"
     assert lines[5] == "| b | 6.00 | 3.00 | 2.00 | 100 | 40 | 0.800 | 0.900 |"
     assert lines[6] == "| **median** (F1: mean) | 4.50 | 2.25 | 2.00 | 100 | 40 | 0.800 | 0.900 |"
+
+
+def test_kernel_listing_names_the_cache_entries_and_sums_them(tmp_path):
+    # an offline cache entry holds its kernel's tasks by name: "<kernel>_c<N>_<K>_kernel_<I>_..."
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    tasks = {"a.tic": b'{"name":"_step_c12_0_kernel_0_range_for"}',
+             "b.tic": b'{"name":"snode_reader_391_kernel_0_serial"}',
+             "c.tic": b'{"name":"tensor_to_ext_arr_c3_1_kernel_0_range_for"}',
+             "ticache.tcb": b"metadata"}
+    for name, text in tasks.items():
+        (cache / name).write_bytes(b"TIC\0" + text)
+    assert sorted(bench._entry_names(str(cache))) == ["_step", "snode_reader_391",
+                                                      "tensor_to_ext_arr"]
+    listing = dict(rows=[dict(module="model.levelset", kernel="LevelSet._step", instances=1),
+                         dict(module="model.levelset", kernel="LevelSet._evolve", instances=2),
+                         dict(module=bench.TAICHI_IO, kernel="tensor_to_ext_arr", instances=3)],
+                   instances=6, cache_entries=7)
+    table = bench.kernel_table(listing)
+    assert "| model.levelset | 2 | 3 |" in table and f"| {bench.TAICHI_IO} | 1 | 3 |" in table
+    assert table.splitlines()[-1] == ("6 kernel instances; 7 entries in an empty offline "
+                                      "cache")

@@ -153,7 +153,7 @@ print(json.dumps(entries))
 
 #: Kernels of the script that compile once per size bucket, each launched once per size.
 BUCKET_KERNELS = ("_bucket_median", "_bucket_census", "_derivatives", "fit",
-                  "refresh_phi_plus", "render_left", "_features", "_signed", "net_change",
+                  "refresh_phi_plus", "render_left", "_distance_step", "net_change",
                   "_pass")
 
 
@@ -254,12 +254,13 @@ print(json.dumps(added))
 """
 
 #: The kernels of a solve that compile once per image size (see
-#: lss_kernels.kernels.backend.Extent): they keep the float code of one size.  The second
-#: list: those of the start's region (model/init.py, here an ellipse read as its box), whose
-#: fields have the image's own size, and Taichi's copy of such a field to numpy.
-PER_SIZE_KERNELS = sorted(["_cost_from_children", "_ray_cast", "upward"]
-                          + ["_sort", "_store", "grow", "keep_near", "load", "mark_near",
-                             "seed", "tensor_to_ext_arr"])
+#: lss_kernels.kernels.backend.Extent): they keep the float code of one size (the set-up's
+#: volumes, whose sums of children do; the ray cast, with B in the iteration's kernel; the
+#: upward pass).  The second list: those of the start's region (model/init.py, here an
+#: ellipse read as its box), whose fields have the image's own size, and the pool's transfer
+#: kernels, which move such fields.
+PER_SIZE_KERNELS = sorted(["_build_costs", "geometry", "upward"]
+                          + ["_region_pass", "_sort", "_store", "load", "read", "write"])
 
 
 @pytest.mark.slow
@@ -294,3 +295,62 @@ def test_an_annex_is_finalised_zeroed_counted_and_destroyed_with_its_pool(ti_arc
     assert extent.size.to_numpy().tolist() == [7, 9]     # the annex's loader ran again
     pool.destroy()
     assert pool._trees == [] and annex._trees == []
+
+
+def test_a_pool_moves_any_field_of_its_own_or_its_annexes_to_and_from_the_host(ti_arch):
+    """FieldPool.read / write (one kernel each for the host fields of a pool and its
+    annexes; Taichi's copies for the others) give back exactly what was written, in the
+    field's shape and dtype, as Taichi's own copies do."""
+    import taichi as ti
+    from lss_kernels.kernels.backend import FieldPool
+    pool = FieldPool()
+    rng = np.random.default_rng(1)
+    cases = [(pool.field(ti.f32, (3, 5), bucket=True), rng.standard_normal((3, 5))),
+             (pool.field(ti.i32, (4,)), np.array([-2 ** 31, 7, 2 ** 31 - 1, 0])),
+             (pool.field(ti.i8, (2, 3), volume=True), np.array([[-128, 0, 127], [1, -1, 5]])),
+             (pool.field(ti.f32, ()), np.array(1.0 / 3.0)),
+             (pool.vector(3, ti.f32, (2, 4), bucket=True), rng.random((2, 4, 3))),
+             (pool.vector(2, ti.i32, ()), np.array([3, -4])),
+             (pool.field(ti.f32, (4, 3), offset=(-1, -2)), rng.random((4, 3)))]
+    annex = pool.annex()
+    cases.append((annex.field(ti.u8, (6,), bucket=True), np.arange(250, 256)))
+    pool.host(*(f for f, _ in cases[1:]))       # the first is not a host field
+    pool.finalize()
+    try:
+        for f, values in cases:
+            pool.write(f, values)
+        for f, values in cases:
+            got = pool.read(f)
+            want = f.to_numpy()
+            assert got.dtype == want.dtype and got.shape == want.shape == values.shape
+            np.testing.assert_array_equal(got, want)
+            np.testing.assert_array_equal(got, values.astype(want.dtype))
+        with pytest.raises(ValueError, match="shape"):
+            pool.write(cases[0][0], np.zeros((5, 3)))
+        other = FieldPool()
+        stranger = other.field(ti.f32, (2,))
+        other.finalize()
+        with pytest.raises(ValueError, match="not one of this pool's"):
+            pool.read(stranger)
+        other.destroy()
+    finally:
+        pool.destroy()
+
+
+def test_a_field_marked_for_the_host_after_a_transfer_is_moved_by_new_kernels(ti_arch):
+    import taichi as ti
+    from lss_kernels.kernels.backend import FieldPool
+    pool = FieldPool()
+    early, late = pool.field(ti.f32, (2, 3), bucket=True), pool.field(ti.i32, (4,))
+    pool.host(early)
+    pool.finalize()
+    try:
+        pool.write(early, np.full((2, 3), 1.5))
+        first = pool._io
+        pool.host(late)
+        pool.write(late, np.arange(4))
+        assert pool._io is not first and pool._io_index[id(late)] is not None
+        np.testing.assert_array_equal(pool.read(late), np.arange(4))
+        np.testing.assert_array_equal(pool.read(early), np.full((2, 3), 1.5, np.float32))
+    finally:
+        pool.destroy()

@@ -106,10 +106,9 @@ def test_opening_and_widening_match_the_specification(region, radius):
     near = rng.random((24, 40)) < 0.7
     near[5:15, 10:30] = True
     region.label.from_numpy(np.where(near, 0, -1).astype(np.int32))
-    region.erode(radius)
+    region.open(radius, radius)
     eroded = ~ref.dilate(~near, radius)          # the image's outside does not erode
     np.testing.assert_array_equal(region.inside.to_numpy() == 1, eroded)
-    region.dilate(radius, radius)
     labels = region.label.to_numpy()
     np.testing.assert_array_equal(labels >= 0, ref.dilate(eroded, radius))
     own = np.arange(24 * 40).reshape(24, 40)
@@ -184,11 +183,9 @@ def test_a_point_grows_over_near_pixels_only(region):
     d[4:14, 14:26] = 7.0                         # a block at the ramp's depth at row ~11
     region.d.from_numpy(d)
     region.mark_near(20, 1.0)
-    region.keep_near()
     near = region.label.to_numpy() >= 0
     assert near[4:8, 14:26].all() and not near[10:].any()
-    region.keep_near()
-    region.seed(5, 20)
+    region.seed(5, 20, keep_near=True)
     region.until_stable(lambda: region.grow(7.0, 1.0, 1.0))
     got = region.label.to_numpy() == 1
     np.testing.assert_array_equal(got, near)

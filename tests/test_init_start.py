@@ -29,8 +29,7 @@ def test_one_sided_widening_matches_the_specification(region, radius, left):
     mask = rng.random((24, 40)) < 0.03
     mask[10:14, 18:22] = True
     region.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
-    region.erode(0)
-    region.dilate(radius, left)
+    region.open(0, radius, left)
     np.testing.assert_array_equal(region.label.to_numpy() >= 0,
                                   _widened_spec(mask, radius, left))
 

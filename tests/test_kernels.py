@@ -936,9 +936,7 @@ def test_background_sweep_matches_reference(ti_arch):
     sd = volume.std(axis=2)
     z = (volume - volume.mean(axis=2, keepdims=True)) / np.where(sd > FLAT, sd, 1)[..., None]
     z[sd <= FLAT] = 0.0
-    sweep._select(cost, shapes, phi, phi_plus, cons, NEAR)
-    sweep._accumulate(cost)
-    sweep._reduce()
+    sweep._sweep(cost, shapes, phi, phi_plus, cons, NEAR)
     totals = sweep.totals.to_numpy()
     assert totals[C + 1] == sel.sum()
     np.testing.assert_allclose(totals[:C], z[sel].sum(axis=0), atol=1e-3)

@@ -9,13 +9,17 @@ with the numpy specification of one iteration (:mod:`lss_kernels.reference.itera
 Taichi copy kernel in device memory on a GPU) to say how close an iteration comes to streaming
 its patch-cost volumes once.
 
+``lss bench --kernels [SOLVE ARGS]`` lists instead the kernel instances that one ``lss solve``
+compiles (default: ``--preset easy``), by module (the stage), from a fresh process with an
+empty offline cache; the count of the cache's entries is the total (:func:`list_kernels`).
+
 Outputs (``--out``): ``scaling.csv`` (one row per configuration and stage), ``speedup.csv``,
 ``scaling.png`` (log-log seconds vs pixels x disparities with the fitted exponents),
 ``results.json`` and ``results.md``.
 
 Examples
 --------
-``lss bench --quick --json`` ; ``python demos/scaling_benchmark.py --out bench_out``
+``lss bench --quick --json`` ; ``lss bench --kernels --scene data/paper15/scene01_monopoly`` ; ``python demos/scaling_benchmark.py --out bench_out``
 """
 from __future__ import annotations
 
@@ -35,8 +39,8 @@ from ..kernels.backend import ARCHES, DEFAULT_ARCH
 from ..model import STAGES
 from .bench_report import report, size_series, summary, write_outputs
 
-__all__ = ["add_cli", "bandwidth", "fit_exponent", "main", "main_bench", "run_benchmark",
-           "synthetic_pair"]
+__all__ = ["add_cli", "bandwidth", "fit_exponent", "kernel_table", "list_kernels", "main",
+           "main_bench", "run_benchmark", "synthetic_pair"]
 
 
 #: Sweeps: ``sizes`` (W, H) at ``size_d`` disparities, ``disparities`` at ``disp_size``, and the
@@ -274,6 +278,104 @@ def _run_isolated(cfg, timeout=900):
                        f"{proc.stderr[-3000:]}{proc.stdout[-2000:]}")
 
 
+# ---------------------------------------------------------------------------- kernel instances
+#: Where a kernel instance comes from, by the module of its ``@ti.kernel``: the paper's stages
+#: (``model/``), the building blocks (``kernels/``), Taichi's own field I/O, and the scalar
+#: fields that Python reads or writes (``field[None]``: one small kernel each).
+TAICHI_IO = "taichi (to_numpy / from_numpy / fill)"
+SNODE_ACCESS = "taichi (field[None] from Python)"
+
+
+def _kernels_worker(argv=None):
+    """``python -c 'from lss_kernels.apps.bench import _kernels_worker; _kernels_worker()' OUT
+    SOLVE_ARGS...``: run ``lss solve SOLVE_ARGS`` and write to OUT (JSON) every kernel
+    instance that Taichi's front end built, as ``[module, name]``."""
+    from taichi.lang import kernel_impl
+    out, *solve_args = argv or sys.argv[1:]
+    built = []
+    materialize = kernel_impl.Kernel.materialize
+
+    def recording(self, key=None, args=None, arg_features=None):
+        if (key if key is not None else (self.func, 0, self.autodiff_mode)) \
+                not in self.compiled_kernels:
+            built.append([self.func.__module__, self.func.__qualname__])
+        return materialize(self, key, args, arg_features)
+
+    kernel_impl.Kernel.materialize = recording
+    from .cli import main as cli_main
+    try:
+        rc = cli_main(["solve", *solve_args])
+    finally:
+        with open(out, "w") as f:
+            json.dump(built, f)
+    sys.exit(rc)
+
+
+def _entry_names(cache):
+    """The kernel name in each entry (``.tic`` file) of a Taichi offline cache folder."""
+    import re
+    names = []
+    for root, _, files in os.walk(cache):
+        for name in sorted(files):
+            if name.endswith(".tic"):
+                with open(os.path.join(root, name), "rb") as f:
+                    m = re.search(rb'"name":"([A-Za-z0-9_]+?)_(?:c\d+_\d+_)?kernel_\d',
+                                  f.read())
+                names.append(m.group(1).decode() if m else "?")
+    return names
+
+
+def list_kernels(solve_args=("--preset", "easy"), timeout=3600):
+    """The kernel instances that one ``lss solve SOLVE_ARGS`` compiles, in a fresh process
+    with an empty Taichi offline cache.
+
+    Returns a dict: ``rows`` (``module``, ``kernel``, ``instances``; Taichi's accessors of
+    ``field[None]`` as one row per accessor name), ``instances`` (the rows' total) and
+    ``cache_entries`` (the ``.tic`` files the process wrote: what a new process loads).
+    """
+    import collections
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix="lss-kernels-") as tmp:
+        out, cache = os.path.join(tmp, "built.json"), os.path.join(tmp, "cache")
+        if not any(a == "--out" for a in solve_args):
+            solve_args = [*solve_args, "--out", os.path.join(tmp, "solve")]
+        env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=cache)
+        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+        code = "from lss_kernels.apps.bench import _kernels_worker; _kernels_worker()"
+        proc = subprocess.run([sys.executable, "-c", code, out, *solve_args],
+                              capture_output=True, text=True, env=env, timeout=timeout)
+        if proc.returncode != 0 or not os.path.exists(out):
+            raise RuntimeError(f"lss solve {' '.join(solve_args)} failed: rc={proc.returncode}"
+                               f"\n{proc.stderr[-3000:]}")
+        with open(out) as f:
+            built = collections.Counter(tuple(b) for b in json.load(f))
+        entries = _entry_names(cache)
+    accessors = collections.Counter(n.split("_")[0] + "_" + n.split("_")[1]
+                                    for n in entries if n.startswith("snode_"))
+    rows = [dict(module=TAICHI_IO if m.startswith("taichi") else m.replace("lss_kernels.", ""),
+                 kernel=k, instances=n) for (m, k), n in sorted(built.items())]
+    rows += [dict(module=SNODE_ACCESS, kernel=k, instances=n) for k, n in sorted(accessors.items())]
+    return dict(rows=rows, instances=sum(r["instances"] for r in rows),
+                cache_entries=len(entries))
+
+
+def kernel_table(listing):
+    """A Markdown table of :func:`list_kernels`: one row per kernel, then one per module."""
+    import collections
+    lines = ["| module (stage) | kernel | instances |", "|---|---|---:|"]
+    lines += [f"| {r['module']} | {r['kernel']} | {r['instances']} |" for r in listing["rows"]]
+    per = collections.Counter()
+    for r in listing["rows"]:
+        per[r["module"]] += r["instances"]
+    lines += ["", "| module (stage) | kernels | instances |", "|---|---:|---:|"]
+    lines += [f"| {m} | {sum(r['module'] == m for r in listing['rows'])} | {n} |"
+              for m, n in sorted(per.items())]
+    lines += ["", f"{listing['instances']} kernel instances; {listing['cache_entries']} entries "
+                  f"in an empty offline cache"]
+    return "\n".join(lines)
+
+
 # ---------------------------------------------------------------------------- the benchmark
 def plan(quick=False, threads=(None,), overrides=None):
     """The list of configurations of a run (dicts for :func:`measure`)."""
@@ -424,6 +526,9 @@ def _configure(p):
                    help="CPU thread counts to sweep (default: Taichi's default)")
     p.add_argument("--cold", action="store_true",
                    help="disable Taichi's offline cache: 'compile' is the real compile time")
+    p.add_argument("--kernels", nargs=argparse.REMAINDER, metavar="SOLVE_ARGS",
+                   help="list the kernel instances that 'lss solve SOLVE_ARGS' compiles "
+                        "(default --preset easy) instead; the remaining arguments go to solve")
     p.add_argument("--in-process", action="store_true",
                    help="run every configuration in this process (one thread setting)")
     return p
@@ -441,6 +546,10 @@ def add_cli(subparsers):
 def main_bench(args) -> int:
     """Entry point of ``lss bench`` (``args`` from :func:`add_cli`)."""
     from ..kernels import backend
+    if args.kernels is not None:
+        listing = list_kernels(args.kernels or ("--preset", "easy"))
+        print(json.dumps(listing) if args.json else kernel_table(listing))
+        return 0
     threads = args.threads or [None]
     if any(t is not None and t < 1 for t in threads):
         raise ValueError(f"--threads: expected positive integers, got {threads}")

@@ -257,6 +257,88 @@ def _zero_all(fields: ti.template()):
                 f[I] = ti.cast(0, f.dtype)
 
 
+@ti.func
+def _element(f: ti.template(), offset: ti.template(), i):
+    """The index of the ``i``-th element of ``f`` (1 to 3 axes) in row-major order
+    (``offset``: the field's first index)."""
+    shape = ti.static(f.shape)
+    if ti.static(len(shape) == 1):
+        return ti.Vector([i + offset[0]])
+    elif ti.static(len(shape) == 2):
+        return ti.Vector([i // shape[1] + offset[0], i % shape[1] + offset[1]])
+    else:
+        return ti.Vector([i // (shape[1] * shape[2]) + offset[0],
+                          i // shape[2] % shape[1] + offset[1], i % shape[2] + offset[2]])
+
+
+@ti.func
+def _get(f: ti.template(), offset: ti.template(), i, out: ti.template()):
+    """Element ``i`` (row-major) of ``f`` into row ``i`` of ``out``, as float64."""
+    if ti.static(len(f.shape) == 0):
+        if ti.static(isinstance(f, ti.MatrixField)):
+            for c in ti.static(range(f.n)):
+                out[i, c] = ti.cast(f[None][c], ti.f64)
+        else:
+            out[i, 0] = ti.cast(f[None], ti.f64)
+    else:
+        I = _element(f, offset, i)
+        if ti.static(isinstance(f, ti.MatrixField)):
+            for c in ti.static(range(f.n)):
+                out[i, c] = ti.cast(f[I][c], ti.f64)
+        else:
+            out[i, 0] = ti.cast(f[I], ti.f64)
+
+
+@ti.func
+def _put(f: ti.template(), offset: ti.template(), i, src: ti.template()):
+    """Row ``i`` of ``src`` into element ``i`` (row-major) of ``f``, cast to its type."""
+    if ti.static(len(f.shape) == 0):
+        if ti.static(isinstance(f, ti.MatrixField)):
+            for c in ti.static(range(f.n)):
+                f[None][c] = ti.cast(src[i, c], f.dtype)
+        else:
+            f[None] = ti.cast(src[i, 0], f.dtype)
+    else:
+        I = _element(f, offset, i)
+        if ti.static(isinstance(f, ti.MatrixField)):
+            for c in ti.static(range(f.n)):
+                f[I][c] = ti.cast(src[i, c], f.dtype)
+        else:
+            f[I] = ti.cast(src[i, 0], f.dtype)
+
+
+@ti.data_oriented
+class _Transfer:
+    """The two kernels that move the host's fields of a pool (and of its annexes) to or from
+    the host: a loop per field, of no elements but for the field asked for.  The fields are
+    attributes read with ``ti.static``, not template arguments, which Taichi would hash at
+    every launch."""
+
+    def __init__(self, fields, offsets):
+        self.fields, self.offsets = tuple(fields), tuple(offsets)
+
+    @ti.kernel
+    def read(self, which: ti.i32, n: ti.i32, out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+        for k in ti.static(range(len(self.fields))):
+            for i in range(ti.select(which == k, n, 0)):
+                _get(self.fields[k], self.offsets[k], i, out)
+
+    @ti.kernel
+    def write(self, which: ti.i32, n: ti.i32, src: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+        for k in ti.static(range(len(self.fields))):
+            for i in range(ti.select(which == k, n, 0)):
+                _put(self.fields[k], self.offsets[k], i, src)
+
+
+def _numpy_dtype(dtype):
+    for np_type, types in ((np.float32, (ti.f32,)), (np.float64, (ti.f64,)),
+                           (np.int32, (ti.i32,)), (np.int8, (ti.i8,)), (np.uint8, (ti.u8,)),
+                           (np.int16, (ti.i16,)), (np.uint16, (ti.u16,)), (np.int64, (ti.i64,))):
+        if dtype in types:
+            return np_type
+    raise TypeError(f"FieldPool: no host transfer for fields of {dtype}")
+
+
 #: The smallest side of a size bucket, pixels (see :func:`bucket_size`).
 BUCKET_MIN = 64
 
@@ -327,6 +409,10 @@ class FieldPool:
         self._loaders = []
         self._bytes = 0
         self.fields = []
+        self._offsets = []
+        self._host = []             # the fields that read and write move (see host)
+        self._root = None           # the pool an annex belongs to
+        self._io = None
         self.generation = None
         self._annexes = []
 
@@ -338,8 +424,10 @@ class FieldPool:
     def annex(self):
         """A pool of its own trees that this pool finalises (after its own), zeroes and
         destroys with itself."""
-        self._annexes.append(FieldPool())
-        return self._annexes[-1]
+        annex = FieldPool()
+        annex._root = self
+        self._annexes.append(annex)
+        return annex
 
     def extent(self, height, width):
         """The pool's :class:`Extent` of ``height x width`` images (one per size, shared by
@@ -390,6 +478,7 @@ class FieldPool:
             n *= s
         self._bytes += n * nbytes
         self.fields.append(f)
+        self._offsets.append(tuple(offset) if offset is not None else (0,) * len(shape))
         return f
 
     def field(self, dtype, shape, offset=None, order=None, volume=False, bucket=False):
@@ -424,6 +513,75 @@ class FieldPool:
         for annex in self._annexes:
             annex.zero()
 
+    def host(self, *fields):
+        """Mark fields of this pool (or an annex) that the host reads or writes during a
+        solve: :meth:`read` and :meth:`write` move them with one kernel each for all of
+        them (``to_numpy`` and ``from_numpy`` compile one per field).  Mark them before
+        :meth:`finalize` (whose loaders transfer): a field marked after the first transfer
+        makes the pool compile its transfer kernels again."""
+        root = self._root if self._root is not None else self
+        for f in fields:
+            self._host.append(f)
+            if root._io is not None and id(f) not in root._io_index:
+                root._io = None
+
+    def _transfer(self):
+        """The :class:`_Transfer` of this pool's host fields and its annexes' (one for all:
+        made on first use, once every tree is finalised)."""
+        if self._io is None:
+            parts = (self, *self._annexes)
+            fields, offsets = [], []
+            for p in parts:
+                for f, o in zip(p.fields, p._offsets):
+                    if any(f is g for q in parts for g in q._host):
+                        fields.append(f)
+                        offsets.append(o)
+            self._io = _Transfer(fields, offsets)
+            self._io_index = {id(f): k for k, f in enumerate(fields)}
+        return self._io
+
+    def _index(self, f):
+        """The transfer of ``f`` and its index there; ``(None, None)`` for a field of the
+        pool that is not a host field."""
+        root = self._root if self._root is not None else self
+        io = root._transfer()
+        k = root._io_index.get(id(f))
+        if k is None:
+            if not any(f is g for p in (root, *root._annexes) for g in p.fields):
+                raise ValueError("FieldPool: the field is not one of this pool's")
+            return None, None
+        return io, k
+
+    def read(self, f):
+        """The whole of field ``f`` (this pool's or an annex's) as a numpy array of its
+        shape (vector fields: one more axis) and dtype: through the pool's one read kernel
+        for a :meth:`host` field, else Taichi's ``to_numpy``."""
+        io, k = self._index(f)
+        if io is None:
+            return f.to_numpy()
+        n = int(np.prod(f.shape, dtype=np.int64))
+        m = f.n if isinstance(f, ti.MatrixField) else 1
+        out = np.zeros((n, m), np.float64)
+        io.read(k, n, out)
+        shape = tuple(f.shape) + ((m,) if isinstance(f, ti.MatrixField) else ())
+        return out.reshape(shape).astype(_numpy_dtype(f.dtype))
+
+    def write(self, f, array):
+        """Write ``array`` (``f``'s shape, vector fields with one more axis) into field
+        ``f`` (this pool's or an annex's): through the pool's one write kernel for a
+        :meth:`host` field, else Taichi's ``from_numpy``."""
+        io, k = self._index(f)
+        m = f.n if isinstance(f, ti.MatrixField) else 1
+        src = np.asarray(array)
+        expected = tuple(f.shape) + ((m,) if isinstance(f, ti.MatrixField) else ())
+        if src.shape != expected:
+            raise ValueError(f"FieldPool.write: expected an array of shape {expected}, "
+                             f"got {src.shape}")
+        if io is None:
+            f.from_numpy(np.array(src, dtype=_numpy_dtype(f.dtype), order="C"))
+            return
+        io.write(k, src.size // m, np.ascontiguousarray(src.reshape(-1, m), dtype=np.float64))
+
     def destroy(self):
         """Free the pool's trees; a pool of an earlier :func:`generation` only drops them."""
         for annex in self._annexes:
@@ -435,6 +593,7 @@ class FieldPool:
         self._trees = []
         self._shared = {}
         self._loaders = []
+        self._io = None
         # Taichi lists the vector fields declared since its last kernel compile and reads
         # their shapes at the next one: a pool destroyed before any kernel ran would leave
         # freed SNodes in that list, and the next compile would crash the process
@@ -469,17 +628,14 @@ class Extent:
     def __init__(self, pool, height, width):
         self.H, self.W = int(height), int(width)
         self.bucket = bucket_shape(self.H, self.W)
+        self.pool = pool
         self.size = pool.field(ti.i32, (2,), bucket=True)
+        pool.host(self.size)
         pool.on_load(self.load)
-
-    @ti.kernel
-    def _load(self, height: ti.i32, width: ti.i32):
-        self.size[0] = height
-        self.size[1] = width
 
     def load(self):
         """Write ``H`` and ``W`` into the field (the pool calls it)."""
-        self._load(self.H, self.W)
+        self.pool.write(self.size, np.array([self.H, self.W]))
 
     @ti.func
     def height(self):
@@ -491,7 +647,7 @@ class Extent:
 
     def image(self, f):
         """The ``H x W`` region of a bucket-shaped field as a numpy array."""
-        return np.ascontiguousarray(f.to_numpy()[:self.H, :self.W])
+        return np.ascontiguousarray(self.pool.read(f)[:self.H, :self.W])
 
     def padded(self, array):
         """``array`` (``(H, W, ...)``) zero-padded to the bucket's shape."""

@@ -55,26 +55,28 @@ class DistanceTransform:
         backend.released(self)
 
     @ti.func
-    def _index(self, axis: ti.template(), line: ti.i32, i: ti.i32, n1, n2: ti.template()):
+    def _index(self, axis, line, i, n1, n2: ti.template()):
         a = 0
         b = 0
         c = 0
-        if ti.static(axis == 0):
+        if axis == 0:
             a, b, c = i, line // n2, line % n2
-        elif ti.static(axis == 1):
+        elif axis == 1:
             a, b, c = line // n2, i, line % n2
         else:
             a, b, c = line // n1, line % n1, i
         return a, b, c
 
     @ti.kernel
-    def _pass(self, f: ti.template(), axis: ti.template(), start: ti.i32, count: ti.i32,
+    def _pass(self, f: ti.template(), axis: ti.i32, start: ti.i32, count: ti.i32,
               n0: ti.i32, n1: ti.i32):
+        """The 1-D transforms of lines ``start .. start + count - 1`` along ``axis`` (read
+        at run time: one kernel for the three axes)."""
         n2 = ti.static(f.shape[2])
         n = n2
-        if ti.static(axis == 0):
+        if axis == 0:
             n = n0
-        elif ti.static(axis == 1):
+        elif axis == 1:
             n = n1
         for t in range(count):
             line = start + t

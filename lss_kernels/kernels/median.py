@@ -214,6 +214,10 @@ class Assign:
     def store(self, y, x, value):
         self.dst[y, x] = value
 
+    @ti.func
+    def end(self):
+        return ti.Vector([0, 0])
+
 
 @ti.data_oriented
 class _BucketTree:
@@ -400,8 +404,9 @@ class MedianFilter:
         self._sort_columns(src)
 
     @ti.kernel
-    def _store(self, sink: ti.template()):
-        """Stage 3: the medians of every block of rows, pixel by pixel, into the sink."""
+    def _store(self, sink: ti.template()) -> ti.types.vector(2, ti.i32):
+        """Stage 3: the medians of every block of rows, pixel by pixel, into the sink;
+        returns the sink's ``end()``."""
         sink.begin()
         L = ti.static(self.lanes)
         height, width = self.extent.height(), self.extent.width()
@@ -413,21 +418,23 @@ class MedianFilter:
                 y = yb * L + lane
                 if y < height:
                     sink.store(y, x, medians[lane])
+        return sink.end()
 
     @ti.kernel
-    def _copy(self, src: ti.template(), sink: ti.template()):
+    def _copy(self, src: ti.template(), sink: ti.template()) -> ti.types.vector(2, ti.i32):
         """The 1x1 median: ``src`` itself."""
         sink.begin()
         for y, x in ti.ndrange(self.extent.height(), self.extent.width()):
             sink.store(y, x, src[y, x])
+        return sink.end()
 
     def run(self, src, sink):
         """``sink.store(y, x, m)`` for every pixel, ``m`` the median of ``src`` (an ``(H, W)``
         plane) over the window centred there, symmetric borders.  Three launches (one for
-        ``size`` 1): :meth:`_sort`, the bucket's tree, :meth:`_store`."""
+        ``size`` 1): :meth:`_sort`, the bucket's tree, :meth:`_store`.  Returns the sink's
+        ``end()``, two integers."""
         if self.median_size == 1:
-            self._copy(src, sink)
-        else:
-            self._sort(src)
-            self._tree._bucket_median()
-            self._store(sink)
+            return self._copy(src, sink)
+        self._sort(src)
+        self._tree._bucket_median()
+        return self._store(sink)

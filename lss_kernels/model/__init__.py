@@ -13,6 +13,7 @@
 ``occlusion``      delta_theta by the ray cast in x-d space, the visible background, the
                    left-view rendering (Sec. 2)
 ``levelset``       phi, its descent step (Eq. 2), re-initialisation and D (Eq. 3)
+``iteration``      the stages of an iteration that run back to back, one kernel each
 =================  =========================================================================
 
 Nothing here imports :mod:`lss_kernels.apps`; the building blocks come from

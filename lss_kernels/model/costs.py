@@ -48,6 +48,7 @@ class BoundaryCosts:
         self.edge_right = pool.field(ti.f32, (H, W), bucket=True)
         self._max = pool.field(ti.f32, (), bucket=True)
         self.alpha = pool.vector(3, ti.f32, (), bucket=True)
+        pool.host(self.alpha)
         # scratch, kept for the solver's life: destroying an SNode tree makes Taichi drop
         # every compiled kernel, which a reset solver would then compile again
         rows = max(1, -(-H * min(C, CHUNK) // C))               # B_occ, a block of rows at a time
@@ -102,38 +103,38 @@ class BoundaryCosts:
         return s
 
     @ti.kernel
-    def _smooth_y(self, src: ti.template(), taps: ti.template(), y0: ti.i32):
-        """Rows y0 .. of src (as many as the chunk holds), smoothed along y, into the chunk
-        (the block and its filter reach are read in their memory order)."""
+    def _occ_chunk(self, src: ti.template(), taps: ti.template(), dtaps: ti.template(),
+                   threshold: ti.f32, y0: ti.i32):
+        """B_occ's features of rows y0 .. of ``src`` (as many as the chunk holds): the rows
+        smoothed along y into the chunk (the block and its filter reach are read in their
+        memory order), then |d/dx of the chunk| above ``threshold``."""
         for r, k, x in ti.ndrange(self._chunk.shape[0], self.C, self.extent.width()):
             if y0 + r < self.extent.height():
                 self._chunk[r, x, k] = self._correlate(src, taps, y0 + r, x, k, 0)
-
-    @ti.kernel
-    def _occ_features(self, taps: ti.template(), threshold: ti.f32, y0: ti.i32):
-        """B_occ's features of those rows: |d/dx of the chunk| above ``threshold``."""
         for r, k, x in ti.ndrange(self._chunk.shape[0], self.C, self.extent.width()):
             if y0 + r < self.extent.height():
-                s = self._correlate(self._chunk, taps, r, x, k, 1)
+                s = self._correlate(self._chunk, dtaps, r, x, k, 1)
                 self.b_occ[y0 + r, x, k] = 0.0 if ti.abs(s) > threshold else INF
 
-    @ti.kernel
-    def _sqrt_normalise(self, vol: ti.template()):
+    @ti.func
+    def _sqrt_normalise(self, vol: ti.template(), rows):
         """The ``H x W`` region of ``vol`` (squared distances, in memory order) <- the
-        distances over their largest finite one, 1 where there is none."""
+        distances over their largest finite one, 1 where there is none (``rows``: the
+        image's height, or 0 for nothing)."""
         self._max[None] = 0.0
-        height, width = self.extent.height(), self.extent.width()
-        for y, k, x in ti.ndrange(height, self.C, width):
+        width = self.extent.width()
+        for y, k, x in ti.ndrange(rows, self.C, width):
             if vol[y, x, k] < INF * 0.5:
                 ti.atomic_max(self._max[None], ti.sqrt(vol[y, x, k]))
         m = self._max[None]
-        for y, k, x in ti.ndrange(height, self.C, width):
+        for y, k, x in ti.ndrange(rows, self.C, width):
             v = vol[y, x, k]
             vol[y, x, k] = ti.min(ti.sqrt(v) / m, 1.0) if (m > 0 and v < INF * 0.5) else 1.0
 
-    def build_occ(self, cost_level1, sigma, threshold):
-        """B_occ from the size-3 normalised cost volume (``cost_level1`` may carry a margin;
-        only its in-image part is read)."""
+    def _occ_distances(self, cost_level1, sigma, threshold):
+        """B_occ's squared distances to its features, from the size-3 normalised cost volume
+        (``cost_level1`` may carry a margin; only its in-image part is read); the first of
+        :meth:`_around_transforms` makes them B_occ."""
         g, _, _ = gaussian_taps(sigma, int(math.ceil(4 * sigma)))
         # derivative taps as central differences of the sampled Gaussian (what a discrete
         # gradient of the smoothing kernel gives)
@@ -143,63 +144,79 @@ class BoundaryCosts:
         # correlation with dg[::-1] is convolution with dg
         dg = tuple(dg[::-1].astype(np.float32).tolist())
         for y0 in range(0, self.H, self._chunk.shape[0]):
-            self._smooth_y(cost_level1, g, y0)
-            self._occ_features(dg, float(threshold), y0)
+            self._occ_chunk(cost_level1, g, dg, float(threshold), y0)
         self._edt3.run(self.b_occ, (self.H, self.W))
-        self._sqrt_normalise(self.b_occ)
 
     # -------------------------------------------------------------------- B_mono
     @ti.kernel
-    def _sobel_edges(self, img: ti.template(), out: ti.template(), threshold: ti.f32):
+    def _around_transforms(self, left: ti.template(), right: ti.template(),
+                           dist2: ti.template(), normalise: ti.i32, score: ti.i32,
+                           features: ti.i32, threshold: ti.f32):
+        """What runs between B's distance transforms, in order: with ``normalise``, B_occ
+        from its transform (:meth:`_sqrt_normalise`); with ``score`` 0 or 1, that side's
+        edge scores from the transform ``dist2`` (:meth:`_edge_score`); with ``features`` 0
+        or 1, that side's edges as the features of the next transform
+        (:meth:`_edge_features`)."""
+        height = self.extent.height()
+        self._sqrt_normalise(self.b_occ, ti.select(normalise == 1, height, 0))
+        self._edge_score(dist2, score, ti.select(score >= 0, height, 0))
+        self._edge_features(left, right, features, threshold, dist2,
+                            ti.select(features >= 0, height, 0))
+
+    @ti.func
+    def _edge_features(self, left: ti.template(), right: ti.template(), side, threshold,
+                       dist2: ti.template(), rows):
+        """The Sobel edges of the left (``side`` 0) or right image as features of the
+        distance map ``dist2`` (0 on an edge, INF elsewhere)."""
         height, width = self.extent.height(), self.extent.width()
-        for y, x in ti.ndrange(height, width):
+        for y, x in ti.ndrange(rows, width):
             gx = 0.0
             gy = 0.0
             for dy, dx in ti.static(ti.ndrange((-1, 2), (-1, 2))):
                 yy = ti.min(ti.max(y + dy, 0), height - 1)
                 xx = ti.min(ti.max(x + dx, 0), width - 1)
-                p = img[yy, xx]
+                p = left[yy, xx]
+                if side == 1:
+                    p = right[yy, xx]
                 grey = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
                 wx = ti.static(dx * (2 - abs(dy)))
                 wy = ti.static(dy * (2 - abs(dx)))
                 gx += wx * grey
                 gy += wy * grey
             mag = ti.sqrt(gx * gx + gy * gy) / 8.0
-            out[y, x] = 0.0 if mag > threshold else INF
+            dist2[y, x, 0] = 0.0 if mag > threshold else INF
 
-    @ti.kernel
-    def _edge_score(self, dist2: ti.template(), out: ti.template()):
+    @ti.func
+    def _edge_score(self, dist2: ti.template(), side, rows):
+        """e_L (``side`` 0) or e_R from the squared distances to the edges."""
         self._max[None] = 0.0
-        height, width = self.extent.height(), self.extent.width()
-        for y, x in ti.ndrange(height, width):
+        width = self.extent.width()
+        for y, x in ti.ndrange(rows, width):
             if dist2[y, x, 0] < INF * 0.5:
                 ti.atomic_max(self._max[None], ti.sqrt(dist2[y, x, 0]))
         m = self._max[None]
-        for y, x in ti.ndrange(height, width):
+        for y, x in ti.ndrange(rows, width):
             d2 = dist2[y, x, 0]
             e = 0.0
             if d2 < INF * 0.5:
                 e = 0.5 * (1.0 - ti.sqrt(d2) / m) if m > 0 else 0.5
-            out[y, x] = e
-
-    def build_mono(self, left, right, threshold):
-        """Edge scores e_L, e_R of the two images (``(H, W)`` vector fields in [0, 1])."""
-        for img, out in ((left, self.edge_left), (right, self.edge_right)):
-            self._sobel_edges(img, out, float(threshold))
-            self._copy_to_3d(out, self._dist2)
-            self._edt2.run(self._dist2, (self.H, self.W))
-            self._edge_score(self._dist2, out)
-
-    @ti.kernel
-    def _copy_to_3d(self, src: ti.template(), dst: ti.template()):
-        for y, x in ti.ndrange(self.extent.height(), self.extent.width()):
-            dst[y, x, 0] = src[y, x]
+            if side == 0:
+                self.edge_left[y, x] = e
+            else:
+                self.edge_right[y, x] = e
 
     def build(self, cost_level1, left, right, params):
-        """Everything B needs, once per solve."""
-        self.alpha[None] = [params.alpha_occ, params.alpha_mono, params.alpha_const]
-        self.build_occ(cost_level1, params.occ_sigma, params.occ_threshold)
-        self.build_mono(left, right, params.mono_threshold)
+        """Everything B needs, once per solve: B_occ, then the edge scores e_L, e_R of the
+        two images (``(H, W)`` vector fields in [0, 1]) for B_mono."""
+        self.extent.pool.write(self.alpha, np.array([params.alpha_occ, params.alpha_mono,
+                                                     params.alpha_const]))
+        self._occ_distances(cost_level1, params.occ_sigma, params.occ_threshold)
+        t, run = float(params.mono_threshold), self._around_transforms
+        run(left, right, self._dist2, 1, -1, 0, t)    # B_occ; the left image's edges
+        self._edt2.run(self._dist2, (self.H, self.W))
+        run(left, right, self._dist2, 0, 0, 1, t)     # e_L; the right image's edges
+        self._edt2.run(self._dist2, (self.H, self.W))
+        run(left, right, self._dist2, 0, 1, -1, t)    # e_R
 
     # -------------------------------------------------------------------- evaluation
     @ti.func

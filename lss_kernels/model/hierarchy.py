@@ -207,7 +207,7 @@ class PatchHierarchy:
         else:
             return self.extent.height(), self.extent.width(), self.image_blocks_now()
 
-    @ti.kernel
+    @ti.func
     def _cost_from_pixels(self, matcher: ti.template(), left: ti.template(),
                           right: ti.template(), level: ti.template()):
         """Level 1's volume (in its memory order: rows, disparities, columns)."""
@@ -227,7 +227,7 @@ class PatchHierarchy:
                     n += 1
             dst[y, x, k] = total / ti.max(n, 1)
 
-    @ti.kernel
+    @ti.func
     def _cost_from_children(self, child: ti.template(), level: ti.template()):
         """A level's volume from its children's (per image size: the counts are the size's
         constants; see the module).  Its bucket's patches past the image's margins get
@@ -245,7 +245,7 @@ class PatchHierarchy:
                 n += m
             dst[y, x, k] = total / ti.max(n, 1)
 
-    @ti.kernel
+    @ti.func
     def _normalise(self, level: ti.template()):
         """Min-max normalise a level's volume to [0, 1] over its in-image patches."""
         vol = ti.static(level.cost)
@@ -273,12 +273,18 @@ class PatchHierarchy:
         Level 1 sums the pixels' matching costs M(x, y, c) of L(x + c) against R(x - c)
         (image coordinates clamped at the borders); each higher level sums its children.
         """
-        self._cost_from_pixels(matcher, left, right, self.levels[0])
-        for child, level in zip(self.levels, self.levels[1:]):
-            self._cost_from_children(child, level)
-        for level in self.levels:
-            self._normalise(level)
+        self._build_costs(matcher, left, right)
         self.cost_version += 1
+
+    @ti.kernel
+    def _build_costs(self, matcher: ti.template(), left: ti.template(), right: ti.template()):
+        """Every level's volume in one launch: level 1 from the pixels, each higher level
+        from its children, then each normalised."""
+        self._cost_from_pixels(matcher, left, right, self.levels[0])
+        for i in ti.static(range(1, len(self.levels))):
+            self._cost_from_children(self.levels[i - 1], self.levels[i])
+        for i in ti.static(range(len(self.levels))):
+            self._normalise(self.levels[i])
 
     # ------------------------------------------------------------------ upward, per iteration
     @ti.func
@@ -459,6 +465,11 @@ class PatchHierarchy:
         """Relay the messages down to the pixels: fills ``precision`` (1/sigma^2) and
         ``consensus_mean`` (d-bar; 0 where no valid patch contains the pixel).  One launch:
         the levels' loops run in order, from the top."""
+        self.down()
+
+    @ti.func
+    def down(self):
+        """:meth:`downward`, for a kernel that runs it with other stages."""
         # the top level has no parent: its relay is just its own messages
         for i in ti.static(range(len(self.levels) - 2, -1, -1)):
             self._down(self.levels[i], self.levels[i + 1], False)

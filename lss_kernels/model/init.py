@@ -59,6 +59,9 @@ import taichi as ti
 from ..kernels.median import Assign, MedianFilter
 from ..start_types import AUTO, Box, InitError, Point
 
+# the passes of InitialRegion._region_pass
+_MARK_NEAR, _KEEP_ABOVE, _PROPAGATE, _SEED, _GROW, _OPEN = range(1, 7)
+
 __all__ = ["InitialRegion", "BOX_SPILL", "MIN_BOX_COVER", "SPILL", "SPILL_LEFT",
            "background_fit", "shift_columns"]
 
@@ -168,15 +171,17 @@ class InitialRegion:
 
     def __init__(self, pool, H: int, W: int):
         self.H, self.W = H, W
+        self.pool = pool
         self.d = pool.field(ti.f32, (H, W))         # d-bar (-1: no match), then its median
         self.d_hi = pool.field(ti.f32, (H, W))      # d-bar's largest over a 5x5 window
         self.label = pool.field(ti.i32, (H, W))     # region id, -1 outside
         self.inside = pool.field(ti.i32, (H, W))    # a region before widening or opening
         self.changed = pool.field(ti.i32, ())
+        pool.host(self.d, self.label)
         self.median = MedianFilter(pool, H, W, MEDIAN)
         self.info, self.grown = {}, None
         #: widest layer in front of the object that a point's region is carried across
-        #: (:meth:`bridge`), cyclopean pixels; 0: none (the paper's two layers)
+        #: (:meth:`_bridge`), cyclopean pixels; 0: none (the paper's two layers)
         self.bridge_gap = 0
 
     @ti.kernel
@@ -188,18 +193,75 @@ class InitialRegion:
         """d-bar <- its ``MEDIAN`` squared median (symmetric borders; no match counts as -1)."""
         self.median.run(self.d, Assign(self.d))
 
+    # The start's passes are one kernel (:meth:`_launch`): each pass a parallel loop over the image that runs
+    # for its own ``op`` only (the others' loops have no rows), with the pass's arguments.
     @ti.kernel
-    def mark_near(self, window: ti.i32, contrast: ti.f32):
+    def _region_pass(self, op: ti.i32, i0: ti.i32, i1: ti.i32, i2: ti.i32, f0: ti.f32,
+                     f1: ti.f32, f2: ti.f32, c: ti.types.vector(6, ti.f32)) -> ti.i32:
+        self.changed[None] = 0
+        self._mark_near(ti.select(op == _MARK_NEAR, self.H, 0), i0, f0)
+        self._keep_above(ti.select(op == _KEEP_ABOVE, self.H, 0), c, f0)
+        self._propagate(op == _PROPAGATE)
+        self._seed(ti.select(op == _SEED, self.H, 0), i0, i1, i2, f0)
+        self._grow(ti.select(op == _GROW, self.H, 0), f0, f1, f2)
+        self._bridge(ti.select(op == _GROW and i2 > 0, self.H, 0), f0, f1, i2)
+        self._erode(ti.select(op == _OPEN, self.H, 0), i0)
+        self._dilate(ti.select(op == _OPEN, self.H, 0), i1, i2)
+        return self.changed[None]
+
+    def _launch(self, op, i0=0, i1=0, i2=0, f0=0.0, f1=0.0, f2=0.0, c=(0.0,) * 6):
+        """Run pass ``op``; returns whether it changed a label (:meth:`propagate`,
+        :meth:`grow`)."""
+        return self._region_pass(op, int(i0), int(i1), int(i2), float(f0), float(f1), float(f2),
+                          np.asarray(c, np.float32))
+
+    def mark_near(self, window, contrast):
         """Label each near pixel with its own index, the others -1 (the module doc).  The
         minima run over d-bar's 5x5 maxima, so a few stray low matches do not pull the
         ground down."""
-        for y, x in self.d:
+        self._launch(_MARK_NEAR, i0=window, f0=contrast)
+
+    def keep_above(self, c, contrast):
+        """Labelled pixels whose d-bar is not ``contrast`` above the quadratic ``c``
+        (:func:`background_fit`) lose their label."""
+        self._launch(_KEEP_ABOVE, f0=contrast, c=c)
+
+    def propagate(self):
+        """Each labelled pixel takes the largest label of its run along its row (a sweep each
+        way, a thread per row), then along its column: until stable, every 4-connected
+        component gets its largest label."""
+        return self._launch(_PROPAGATE)
+
+    def seed(self, sy, sx, seed_d=None, keep_near=False):
+        """The region is pixel ``(sy, sx)`` alone; with ``keep_near``, first the pixels that
+        are not near lose their d-bar (a region grown next stays on near ones); with
+        ``seed_d``, the seed's d-bar becomes it."""
+        self._launch(_SEED, i0=sy, i1=sx, i2=int(keep_near) + 2 * int(seed_d is not None),
+                     f0=seed_d if seed_d is not None else 0.0)
+
+    def grow(self, seed_d, tolerance, step, gap=0):
+        """Pixels next to the region whose d-bar is close to the seed's and the neighbour's
+        join it; then, with ``gap`` > 0, the region is carried across thin layers in front
+        of it (:meth:`_bridge`)."""
+        return self._launch(_GROW, i2=gap, f0=seed_d, f1=tolerance, f2=step)
+
+    def open(self, erode, radius, left=None):
+        """``inside``: the labelled pixels whose whole ``2 erode + 1`` square (in the image)
+        is labelled (``erode`` 0: the labelled pixels); then ``inside`` widened by
+        ``radius`` up, down and to the right and by ``left`` (default ``radius``) to the
+        left: each pixel with an ``inside`` pixel in rows ``y - radius .. y + radius``,
+        columns ``x - radius .. x + left``, is labelled with its own index, the others -1."""
+        self._launch(_OPEN, i0=erode, i1=radius, i2=radius if left is None else left)
+
+    @ti.func
+    def _mark_near(self, rows, window, contrast):
+        for y, x in ti.ndrange(rows, self.W):
             hi = -1.0
             for v, u in ti.ndrange((y - 2, y + 3), (x - 2, x + 3)):
                 if 0 <= v < self.H and 0 <= u < self.W:
                     hi = ti.max(hi, self.d[v, u])
             self.d_hi[y, x] = hi
-        for y, x in self.d:
+        for y, x in ti.ndrange(rows, self.W):
             d = self.d[y, x]
             lo_l, lo_r = 1e9, 1e9
             for k in range(1, window + 1):
@@ -214,11 +276,9 @@ class InitialRegion:
             if d >= 0 and ground < 1e8 and d - ground > contrast:
                 self.label[y, x] = y * self.W + x
 
-    @ti.kernel
-    def keep_above(self, c: ti.types.vector(6, ti.f32), contrast: ti.f32):
-        """Labelled pixels whose d-bar is not ``contrast`` above the quadratic ``c``
-        (:func:`background_fit`) lose their label."""
-        for y, x in self.label:
+    @ti.func
+    def _keep_above(self, rows, c, contrast):
+        for y, x in ti.ndrange(rows, self.W):
             xn = (ti.cast(x, ti.f32) / self.W) - 0.5
             yn = (ti.cast(y, ti.f32) / self.H) - 0.5
             ground = c[0] * xn * xn + c[1] * xn * yn + c[2] * yn * yn + c[3] * xn \
@@ -226,17 +286,14 @@ class InitialRegion:
             if self.label[y, x] >= 0 and self.d[y, x] - ground <= contrast:
                 self.label[y, x] = -1
 
-    @ti.kernel
-    def propagate(self):
-        """Each labelled pixel takes the largest label of its run along its row (a sweep each
-        way, a thread per row), then along its column: until stable, every 4-connected
-        component gets its largest label."""
-        for y in range(self.H):
+    @ti.func
+    def _propagate(self, on):
+        for y in range(ti.select(on, self.H, 0)):
             for way in ti.static(range(2)):
                 run = -1
                 for k in range(self.W):
                     run = self._carry(y, k if way == 0 else self.W - 1 - k, run)
-        for x in range(self.W):
+        for x in range(ti.select(on, self.W, 0)):
             for way in ti.static(range(2)):
                 run = -1
                 for k in range(self.H):
@@ -254,16 +311,18 @@ class InitialRegion:
                 self.changed[None] = 1
         return out
 
-    @ti.kernel
-    def seed(self, sy: ti.i32, sx: ti.i32):
-        for y, x in self.label:
+    @ti.func
+    def _seed(self, rows, sy, sx, how, seed_d):
+        for y, x in ti.ndrange(rows, self.W):
+            if how % 2 == 1 and self.label[y, x] < 0:      # keep near
+                self.d[y, x] = -1.0
             self.label[y, x] = 1 if (y == sy and x == sx) else -1
+            if how >= 2 and y == sy and x == sx:
+                self.d[y, x] = seed_d
 
-    @ti.kernel
-    def grow(self, seed_d: ti.f32, tolerance: ti.f32, step: ti.f32):
-        """Pixels next to the region whose d-bar is close to the seed's and the neighbour's
-        join it."""
-        for y, x in self.label:
+    @ti.func
+    def _grow(self, rows, seed_d, tolerance, step):
+        for y, x in ti.ndrange(rows, self.W):
             d = self.d[y, x]
             if self.label[y, x] < 0 and d >= 0 and ti.abs(d - seed_d) <= tolerance:
                 for k in ti.static(range(4)):
@@ -274,13 +333,13 @@ class InitialRegion:
                             self.label[y, x] = 1
                             self.changed[None] = 1
 
-    @ti.kernel
-    def bridge(self, seed_d: ti.f32, tolerance: ti.f32, max_gap: ti.i32):
+    @ti.func
+    def _bridge(self, rows, seed_d, tolerance, max_gap):
         """Carry the region across a thin layer in front of it: from a region pixel, along
         its row and its column, over at most ``max_gap`` pixels whose d-bar stands more than
         ``tolerance`` in front of the seed's, to a pixel within ``tolerance`` of the seed's,
         which joins the region with the pixels crossed."""
-        for y, x in self.label:
+        for y, x in ti.ndrange(rows, self.W):
             if self.label[y, x] == 1:
                 for k in ti.static(range(4)):
                     dy, dx = ti.static(((0, 1), (0, -1), (1, 0), (-1, 0))[k])
@@ -302,31 +361,18 @@ class InitialRegion:
                                 self.label[v, u] = 1
                                 self.changed[None] = 1
 
-    @ti.kernel
-    def keep_near(self):
-        """Pixels that are not near lose their d-bar (a region grown next stays on near ones)."""
-        for y, x in self.d:
-            if self.label[y, x] < 0:
-                self.d[y, x] = -1.0
-
-    @ti.kernel
-    def erode(self, radius: ti.i32):
-        """``inside``: the labelled pixels whose whole ``2 radius + 1`` square (in the image)
-        is labelled (``radius`` 0: the labelled pixels)."""
-        for y, x in self.label:
+    @ti.func
+    def _erode(self, rows, radius):
+        for y, x in ti.ndrange(rows, self.W):
             keep = 1
             for v, u in ti.ndrange((y - radius, y + radius + 1), (x - radius, x + radius + 1)):
                 if 0 <= v < self.H and 0 <= u < self.W and self.label[v, u] < 0:
                     keep = 0
             self.inside[y, x] = keep
 
-    @ti.kernel
-    def dilate(self, radius: ti.i32, left: ti.i32):
-        """``inside`` widened by ``radius`` up, down and to the right and by ``left`` to the
-        left (``left = radius``: the ``2 radius + 1`` square): each pixel with an ``inside``
-        pixel in rows ``y - radius .. y + radius``, columns ``x - radius .. x + left``, is
-        labelled with its own index, the others -1."""
-        for y, x in self.label:
+    @ti.func
+    def _dilate(self, rows, radius, left):
+        for y, x in ti.ndrange(rows, self.W):
             hit = 0
             for v, u in ti.ndrange((y - radius, y + radius + 1), (x - radius, x + left + 1)):
                 if 0 <= v < self.H and 0 <= u < self.W and self.inside[v, u] == 1:
@@ -334,10 +380,10 @@ class InitialRegion:
             self.label[y, x] = y * self.W + x if hit == 1 else -1
 
     def until_stable(self, launch) -> int:
+        """Launch a pass (:meth:`propagate`, :meth:`grow`) until it changes nothing; returns
+        the rounds it took."""
         for rounds in range(1, MAX_ROUNDS + 1):
-            self.changed[None] = 0
-            launch()
-            if self.changed[None] == 0:
+            if launch() == 0:
                 return rounds
         return MAX_ROUNDS
 
@@ -403,19 +449,17 @@ class InitialRegion:
 
     def _widened(self, radius: int = SPILL, left: int = None) -> np.ndarray:
         """The labelled pixels widened by ``radius`` (``left`` to the left), as a mask."""
-        self.erode(0)
-        self.dilate(radius, radius if left is None else left)
-        return self.label.to_numpy() >= 0
+        self.open(0, radius, left)
+        return self.pool.read(self.label) >= 0
 
     def _candidates(self, background):
         """The near pixels ``contrast`` above ``background`` (None: all of them), opened,
         as 4-connected candidates; the one :func:`pick_region` picks, as ``(mask, facts)``."""
         if background is not None:
             self.keep_above(background.astype(np.float32), CONTRAST)
-        self.erode(OPENING // 2)
-        self.dilate(OPENING // 2, OPENING // 2)
+        self.open(OPENING // 2, OPENING // 2)
         rounds = self.until_stable(self.propagate)
-        mask, facts = pick_region(self.label.to_numpy(), int(MIN_AREA * self.H * self.W))
+        mask, facts = pick_region(self.pool.read(self.label), int(MIN_AREA * self.H * self.W))
         return mask, {**facts, "rounds": rounds}
 
     def _nested(self, mask, near, d):
@@ -427,7 +471,7 @@ class InitialRegion:
         if inner is None:
             return mask, near
         index = np.arange(self.H * self.W, dtype=np.int32).reshape(self.H, self.W)
-        self.label.from_numpy(np.where(mask, index, -1).astype(np.int32))
+        self.pool.write(self.label, np.where(mask, index, -1).astype(np.int32))
         self.keep_above(inner.astype(np.float32), NEST_CONTRAST)
         sub, facts = self._candidates(None)
         info.update(facts)
@@ -439,7 +483,7 @@ class InitialRegion:
 
     def _point(self, point):
         H, W = self.H, self.W
-        d = self.d.to_numpy()
+        d = self.pool.read(self.d)
         y, xc = (min(max(int(round(v)), 0), n - 1) for v, n in ((point.y, H), (point.x, W)))
         for _ in range(3):                       # left view -> cyclopean: x_c = x - c(x_c)
             c = max(float(d[y, xc]), 0.0)
@@ -451,17 +495,10 @@ class InitialRegion:
                             f"pick a textured pixel on the object")
         seed_d = float(np.median(patch))
         band = max(BAND_MIN, BAND * seed_d)
-        near = bool(self.label[y, xc] >= 0)
-        if near:
-            self.keep_near()
-        self.seed(y, xc)
-        self.d[y, xc] = seed_d
-        def round_():
-            self.grow(seed_d, band, band)
-            if self.bridge_gap > 0:
-                self.bridge(seed_d, band, self.bridge_gap)
-        rounds = self.until_stable(round_)
-        found = int((self.label.to_numpy() == 1).sum())
+        near = bool(self.pool.read(self.label)[y, xc] >= 0)
+        self.seed(y, xc, seed_d, keep_near=near)
+        rounds = self.until_stable(lambda: self.grow(seed_d, band, band, self.bridge_gap))
+        found = int((self.pool.read(self.label) == 1).sum())
         self.info = {"kind": "point", "point": [point.x, point.y], "seed_cyclopean": [xc, y],
                      "seed_disparity": 2.0 * seed_d, "band_px": 2.0 * band,
                      "over": "near pixels" if near else "all pixels", "found": found,
@@ -475,16 +512,16 @@ class InitialRegion:
         return self._widened(SPILL, SPILL_LEFT)
 
     def _auto(self):
-        labels = self.label.to_numpy()
+        labels = self.pool.read(self.label)
         near = labels >= 0
-        d = self.d.to_numpy()
+        d = self.pool.read(self.d)
         background, fit = background_fit(d)
         mask, facts = self._candidates(background)
         if mask is None and background is not None:
             # a jump below the fit's band leaves the object among the fit's inliers, and the
             # quadratic bulges over it: fit again from the pixels that are not near, with
             # the near pixels' own contrast as the band
-            self.label.from_numpy(labels)
+            self.pool.write(self.label, labels)
             background, fit = background_fit(d, band=CONTRAST, start=~near)
             mask, facts = self._candidates(background)
             fit["start"] = "the pixels that are not near (no region above the first fit)"
@@ -499,9 +536,8 @@ class InitialRegion:
             mask, near = self._nested(mask, near, d)
         # the object's extent: its near pixels within REGROW of the pixels above the fit
         # (where the object pulls the fit up, its rim is not above it)
-        self.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
-        self.erode(0)
-        self.dilate(REGROW, REGROW)
-        mask = ((self.label.to_numpy() >= 0) & near) | mask
-        self.label.from_numpy(np.where(mask, 0, -1).astype(np.int32))
+        self.pool.write(self.label, np.where(mask, 0, -1).astype(np.int32))
+        self.open(0, REGROW)
+        mask = ((self.pool.read(self.label) >= 0) & near) | mask
+        self.pool.write(self.label, np.where(mask, 0, -1).astype(np.int32))
         return self._widened()

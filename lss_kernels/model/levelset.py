@@ -84,6 +84,10 @@ class Settle:
         self.ls.D[y, x] = ti.min(ti.max(disparity(self.shapes, value, x, y), 0.0),
                                  self.ls.d_limit[None])
 
+    @ti.func
+    def end(self):
+        return ti.Vector([self.ls.flipped[None], self.ls.area[None]])
+
 
 @ti.data_oriented
 class LevelSet:
@@ -117,6 +121,7 @@ class LevelSet:
         self.boundary = pool.field(ti.i32, (), bucket=True)
         self.reference_sign = pool.field(ti.i8, (H, W), bucket=True)
         self.area = pool.field(ti.i32, (), bucket=True)
+        pool.host(self.d_limit, self.phi, self.phi_next, self.D)   # start(), outputs
         self.curvature_clip = float(params.curvature_clip)
         self.boundary_clip = float(params.boundary_clip)
         self.scale = float(params.phi_scale)
@@ -183,6 +188,11 @@ class LevelSet:
 
     @ti.kernel
     def _derivatives(self, band: ti.f32):
+        self.derive(band)
+
+    @ti.func
+    def derive(self, band):
+        """:meth:`derivatives`, for a kernel that runs it with other stages."""
         self._mark_band(band)
         self.filters.rows(self.phi, (0, 1, 2), self.near_rows, (1,))
         self._columns_curvature()
@@ -247,6 +257,11 @@ class LevelSet:
         """B(x, y, Theta_1(x, y)) and the row pass of its gradient (the column pass runs in
         the Eq. 2 step, which alone needs grad B), in one launch; where the step reads them
         (:meth:`_mark_band`, after :meth:`derivatives`)."""
+        self.boundary_terms(costs, shapes)
+
+    @ti.func
+    def boundary_terms(self, costs: ti.template(), shapes: ti.template()):
+        """:meth:`boundary_weight`, for a kernel that runs it with other stages."""
         self._b_map(costs, shapes)
         self.filters.rows(self.b_map, (0, 1), self.near_rows, ())
 
@@ -356,40 +371,40 @@ class LevelSet:
 
     # ---------------------------------------------------------------- re-initialisation, stopping
     @ti.kernel
-    def _features(self, src: ti.template(), foreground: ti.i32):
-        for y, x in self.phi:
-            if y < self.extent.height() and x < self.extent.width():
-                inside = src[y, x] > 0
-                self.distance_map[y, x, 0] = 0.0 if inside == (foreground == 1) else INF
-
-    @ti.kernel
-    def _signed(self, phi: ti.template(), foreground: ti.i32, scale: ti.f32):
-        # phi = scale * (distance to the other region - 1/2), the boundary lying between
-        # pixel centres; the distance is capped at the image diagonal
+    def _distance_step(self, phi: ti.template(), signed: ti.i32, features: ti.i32,
+                       scale: ti.f32):
+        """Around a distance transform of ``distance_map``: with ``signed`` 0 or 1, phi of
+        that region (1: phi > 0) <- ``scale`` x (its distance to the other region - 1/2),
+        the boundary lying between pixel centres and the distance capped at the image
+        diagonal; then, with ``features`` 0 or 1, the features of the next transform, the
+        pixels of that region."""
         height, width = self.extent.height(), self.extent.width()
         cap = ti.sqrt(ti.cast(height * height + width * width, ti.f32))
-        for y, x in phi:
-            if y < height and x < width:
-                inside = phi[y, x] > 0
-                if inside == (foreground == 1):
-                    # d >= 1 (measured to the nearest pixel of the other region): signs are kept
-                    d = ti.min(ti.sqrt(self.distance_map[y, x, 0]), cap)
-                    phi[y, x] = (scale if foreground == 1 else -scale) * (d - 0.5)
+        for y, x in ti.ndrange(ti.select(signed >= 0, height, 0), width):
+            inside = phi[y, x] > 0
+            if inside == (signed == 1):
+                # d >= 1 (measured to the nearest pixel of the other region): signs are kept
+                d = ti.min(ti.sqrt(self.distance_map[y, x, 0]), cap)
+                phi[y, x] = (scale if signed == 1 else -scale) * (d - 0.5)
+        for y, x in ti.ndrange(ti.select(features >= 0, height, 0), width):
+            inside = phi[y, x] > 0
+            self.distance_map[y, x, 0] = 0.0 if inside == (features == 1) else INF
 
     def reinitialise(self, phi):
         """phi <- phi_scale x signed distance of the region phi > 0, in place (the signs, and
         so the region, are kept)."""
-        for region in (1, 0):
-            self._features(phi, 1 - region)  # distance to the pixels of the other region
-            self.distance.run(self.distance_map, (self.H, self.W))
-            self._signed(phi, region, self.scale)
+        self._distance_step(phi, -1, 0, self.scale)     # distance to the background
+        self.distance.run(self.distance_map, (self.H, self.W))
+        self._distance_step(phi, 1, 1, self.scale)      # then to the foreground
+        self.distance.run(self.distance_map, (self.H, self.W))
+        self._distance_step(phi, 0, -1, self.scale)
 
     @ti.kernel
-    def net_change(self):
+    def net_change(self) -> ti.types.vector(2, ti.i32):
         """Pixels whose label differs from the reference taken at the last call (``changed``:
         the net change over a window, an oscillating boundary does not count), and the
         boundary's length (``boundary``: foreground pixels with a 4-neighbour of the
-        background inside the image); renews the reference."""
+        background inside the image); renews the reference.  Returns both."""
         self.changed[None] = 0
         self.boundary[None] = 0
         height, width = self.extent.height(), self.extent.width()
@@ -404,41 +419,33 @@ class LevelSet:
                 up, down = self.phi[ti.max(y - 1, 0), x], self.phi[ti.min(y + 1, height - 1), x]
                 if now == 1 and ti.min(ti.min(left, right), ti.min(up, down)) <= 0:
                     self.boundary[None] += 1
+        return ti.Vector([self.changed[None], self.boundary[None]])
 
     def settle(self, shapes):
         """phi <- the median of phi_next, counting the sign flips (``flipped``) and the
-        foreground (``area``), and D (Eq. 3) of the new phi from ``shapes``."""
+        foreground (``area``), and D (Eq. 3) of the new phi from ``shapes``; returns
+        ``(flipped, area)``."""
         sink = self._settle.get(id(shapes))
         if sink is None:
             sink = self._settle[id(shapes)] = Settle(self, shapes)
-        self.median.run(self.phi_next, sink)
+        return self.median.run(self.phi_next, sink)
 
     def evolve(self, cost, c_max, shapes, occ, params, reinit):
         """One descent step of Eq. 2, then (every ``reinit_every``) the signed-distance
-        re-initialisation and the median filter (:meth:`settle`)."""
+        re-initialisation and the median filter (:meth:`settle`); returns ``(flipped,
+        area)``."""
         self._step(cost, c_max, shapes, occ, params.dt, params.mu, self.band)
         if self.has_hidden:
             self._carry_hidden(params.dt, self.band)
         if reinit:
             self.reinitialise(self.phi_next)
-        self.settle(shapes)
-
-    @ti.kernel
-    def _take_next(self):
-        for y, x in self.phi:
-            if y < self.extent.height() and x < self.extent.width():
-                self.phi[y, x] = self.phi_next[y, x]
-
-    @ti.kernel
-    def _from_mask(self, mask: ti.types.ndarray()):
-        for y, x in self.phi:
-            if y < self.extent.height() and x < self.extent.width():
-                self.phi_next[y, x] = 1.0 if mask[y, x] != 0 else -1.0
+        return self.settle(shapes)
 
     def start(self, mask, c_max):
         """phi = phi_scale x signed distance of a boolean ``(H, W)`` mask; D will be clamped
         to [0, ``c_max``]."""
-        self.d_limit[None] = float(c_max)
-        self._from_mask(np.ascontiguousarray(mask, dtype=np.int32))
+        pool = self.extent.pool
+        pool.write(self.d_limit, np.array(float(c_max)))
+        pool.write(self.phi_next, self.extent.padded(np.where(mask, 1.0, -1.0)))
         self.reinitialise(self.phi_next)
-        self._take_next()
+        pool.write(self.phi, pool.read(self.phi_next))

@@ -25,6 +25,7 @@ integer messages).
 
 Frame: cyclopean; disparities ``c = 1 .. c_max`` (volume index ``k = c - 1``).
 """
+import numpy as np
 import taichi as ti
 
 __all__ = ["Messages"]
@@ -68,6 +69,7 @@ class Messages:
                           for _ in self.levels] if self.ambiguity > 0 else [])
         self._cached = None       # (beta, the hierarchy's cost_version) of the cache
         self._distinct_version = None
+        self.extent.pool.host(*(level.key for level in self.levels))   # emptied by prepare
 
     @ti.func
     def _refine(self, cost: ti.template(), y, x, arg):
@@ -208,6 +210,14 @@ class Messages:
         plain argmin and every patch is valid.  ``keep``: also store ``d_p``, ``sigma_p``
         and ``valid`` (same inputs give the same messages: a second call after an
         iteration's reproduces them)."""
+        self._all_levels(self.prepare(beta, use_prior, use_validity), int(use_validity),
+                         bool(keep))
+
+    def prepare(self, beta, use_prior, use_validity):
+        """What :meth:`run` does on the host before its kernel (:meth:`levels_func`, which a
+        kernel can run with other stages): the patches' distinctness once per cost volume,
+        the cache of candidates emptied when the prior weight or the volumes changed.
+        Returns the prior weight."""
         beta = float(beta) if use_prior else 0.0
         if not use_prior and use_validity:
             raise ValueError("messages: validity needs the prior (iteration >= 2)")
@@ -218,9 +228,9 @@ class Messages:
             self._distinct_version = self.hierarchy.cost_version
         if self._cached != cached:
             for level in self.levels:
-                level.key.fill(0)
+                self.extent.pool.write(level.key, np.zeros(level.key.shape + (level.key.n,)))
             self._cached = cached
-        self._all_levels(beta, int(use_validity), bool(keep))
+        return beta
 
     @ti.kernel
     def _distinctness(self, i: ti.template(), cost: ti.template()):
@@ -253,5 +263,10 @@ class Messages:
     @ti.kernel
     def _all_levels(self, beta: ti.f32, use_validity: ti.i32, keep: ti.template()):
         """:meth:`_level` for every level, in one launch."""
+        self.levels_func(beta, use_validity, keep)
+
+    @ti.func
+    def levels_func(self, beta, use_validity, keep: ti.template()):
+        """:meth:`_level` for every level (for a kernel that runs it with other stages)."""
         for i in ti.static(range(len(self.levels))):
             self._level(self.levels[i], beta, use_validity, keep)

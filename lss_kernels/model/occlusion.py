@@ -96,7 +96,11 @@ class OcclusionGeometry:
     @ti.kernel
     def _ray_cast(self, shapes: ti.template(), phi_x: ti.template(), ray_cast: ti.i32,
                   t_max: ti.f32):
-        """:meth:`compute`; ``t_max`` (the largest jump, 2 c_max) is an argument, not a
+        self.cast(shapes, phi_x, ray_cast, t_max)
+
+    @ti.func
+    def cast(self, shapes: ti.template(), phi_x: ti.template(), ray_cast, t_max):
+        """:meth:`compute` (for a kernel that runs it with other stages); ``t_max`` (the largest jump, 2 c_max) is an argument, not a
         constant, so that the kernel does not depend on the disparity range.  Once per image
         size: the size and the shapes' normalisation are compile-time constants
         (:meth:`~lss_kernels.model.shapes.GlobalShapes.value_of_size`), which keeps the
@@ -130,6 +134,11 @@ class OcclusionGeometry:
     def refresh_phi_plus(self, phi: ti.template()):
         """phi_plus = phi(x + delta_theta), the level set where the ray from (x, y) meets the
         foreground's layer (Eq. 4's validity and the visible background read its sign)."""
+        self.refresh(phi)
+
+    @ti.func
+    def refresh(self, phi: ti.template()):
+        """:meth:`refresh_phi_plus`, for a kernel that runs it with other stages."""
         height, width = self.extent.height(), self.extent.width()
         for y, x in self.phi_plus:
             if y < height and x < width:

@@ -92,11 +92,10 @@ class LayerRefinement:
         self.peak_ratio = field(ti.f32, shape)     # the best over the second, every pass's
         # box sums of a 4-channel source, a value and its weight per layer (value fg,
         # value bg, weight fg, weight bg): its row prefix sums, the column prefix sums of
-        # their row boxes, the box, and the residual's average (the sums of both boxes)
+        # their row boxes, and the residual's average (the sums of both boxes)
         self.source = vector()
         self.prefix = vector()
         self.columns = vector()
-        self.box = vector()
         self.average = vector()
         self.count = vector()        # the same boxes' layer pixels (fg, bg, -, -)
 
@@ -106,7 +105,7 @@ class LayerRefinement:
         return (0, self.extent.height()), (0, self.extent.width())
 
     # ------------------------------------------------------------------ box sums
-    @ti.kernel
+    @ti.func
     def _row_prefix(self):
         """``prefix``: the prefix sums of ``source`` along each row."""
         width = self.extent.width()
@@ -116,8 +115,8 @@ class LayerRefinement:
                 s += self.source[y, x]
                 self.prefix[y, x] = s
 
-    @ti.kernel
-    def _column_prefix(self, r: ti.i32):
+    @ti.func
+    def _column_prefix(self, r):
         """``columns``: the prefix sums down each column of the row boxes (half-width r,
         clamped to the image) that ``prefix`` gives."""
         height, width = self.extent.height(), self.extent.width()
@@ -138,25 +137,37 @@ class LayerRefinement:
             v -= self.columns[y - r - 1, x]
         return v
 
-    @ti.kernel
-    def _column_box(self, r: ti.i32):
-        for y, x in ti.ndrange(*self._pixels()):
-            self.box[y, x] = self._box(y, x, r)
-
-    def box_sum(self, r):
-        """``box`` = the sums of ``source`` over the in-image pixels of the
+    @ti.func
+    def _accumulate(self, r, weight):
+        """``average = weight x box`` for weight 1, ``average += weight x box`` otherwise,
+        with ``box`` the sums of ``source`` over the in-image pixels of the
         ``(2 r + 1)^2`` window around each pixel."""
         self._row_prefix()
         self._column_prefix(r)
-        self._column_box(r)
+        for y, x in ti.ndrange(*self._pixels()):
+            self.average[y, x] = weight * self._box(y, x, r) + \
+                ti.select(weight < 1.0, self.average[y, x], 0.0)
+
+    @ti.func
+    def _boxes(self, r, wide):
+        """``average``: the box sums of ``source`` over the ``r`` box plus ``wide`` times
+        the ``4 r`` box."""
+        self._accumulate(r, 1.0)
+        self._accumulate(4 * r, wide)
 
     # ------------------------------------------------------------------ the passes
     @ti.kernel
-    def _load(self, surface: ti.template(), foreground: ti.template(),
-              occlusion: ti.template(), d_max: ti.f32):
-        """The surface clamped to the searched range ``[0, d_max]`` (a quadratic can leave
-        it; its candidates would then lie outside the sweep), non-finite values as 0."""
-        for y, x in ti.ndrange(*self._pixels()):
+    def _begin(self, surface: ti.template(), foreground: ti.template(),
+               occlusion: ti.template(), d_max: ti.f32, first: ti.i32,
+               R: ti.i32) -> ti.types.vector(2, ti.i32):
+        """A pass's candidate centres and their span, no costs yet; on the ``first`` pass
+        the layers, and the surface clamped to the searched range ``[0, d_max]`` (a
+        quadratic can leave it; its candidates would then lie outside the sweep),
+        non-finite values as 0.  Returns the span."""
+        self.span[0] = 1 << 30
+        self.span[1] = -(1 << 30)
+        for y, x in ti.ndrange((0, ti.select(first == 1, self.extent.height(), 0)),
+                               (0, self.extent.width())):
             s = surface[y, x]
             if not (s >= 0.0 and s <= 3.0e38):
                 s = 0.0
@@ -164,12 +175,6 @@ class LayerRefinement:
             self.label[y, x] = 1 - foreground[y, x]
             self.visible[y, x] = 1 - occlusion[y, x]
             self.peak_ratio[y, x] = 0.0
-
-    @ti.kernel
-    def _start_pass(self, R: ti.i32):
-        """Candidate centres and their span; no costs yet."""
-        self.span[0] = 1 << 30
-        self.span[1] = -(1 << 30)
         for y, x in ti.ndrange(*self._pixels()):
             b = ti.cast(ti.round(self.surface[y, x]), ti.i32)
             self.base[y, x] = b
@@ -177,6 +182,7 @@ class LayerRefinement:
             ti.atomic_max(self.span[1], b)
             for k in range(2 * R + 1):
                 self.costs[y, x, k] = NO_COST
+        return ti.Vector([self.span[0], self.span[1]])
 
     @ti.func
     def _match(self, left: ti.template(), right: ti.template(), y, x, d):
@@ -192,19 +198,18 @@ class LayerRefinement:
                           ti.select(fg, 1.0, 0.0), ti.select(bg, 1.0, 0.0)])
 
     @ti.kernel
-    def _match_rows(self, left: ti.template(), right: ti.template(), d: ti.i32):
-        """Row prefix sums of the matching source at disparity d."""
+    def _sweep(self, left: ti.template(), right: ti.template(), d: ti.i32, R: ti.i32,
+               r: ti.i32):
+        """Step 1 at disparity d: the layer-restricted window mean (the box of half-width
+        r) for the pixels whose candidate range holds d and whose right pixel is in the
+        image."""
         width = self.extent.width()
-        for y in range(self.extent.height()):
+        for y in range(self.extent.height()):      # row prefix sums of the source at d
             s = ti.Vector([0.0, 0.0, 0.0, 0.0])
             for x in range(width):
                 s += self._match(left, right, y, x, d)
                 self.prefix[y, x] = s
-
-    @ti.kernel
-    def _store(self, d: ti.i32, R: ti.i32, r: ti.i32):
-        """The layer-restricted window mean (the box of half-width r) at disparity d, for
-        the pixels whose candidate range holds d and whose right pixel is in the image."""
+        self._column_prefix(r)
         for y, x in ti.ndrange(*self._pixels()):
             k = d - self.base[y, x] + R
             if 0 <= k <= 2 * R and x - d >= 0:
@@ -214,8 +219,8 @@ class LayerRefinement:
                 if n > 0:
                     self.costs[y, x, k] = box[lab] / n
 
-    @ti.kernel
-    def _select(self, R: ti.i32, ratio: ti.f32):
+    @ti.func
+    def _select(self, R, ratio):
         """Per pixel: the distinct, interior best candidate (peak ratio), refined to the
         parabola's vertex; its residual against the surface and its weight (1 or 0)."""
         for y, x in ti.ndrange(*self._pixels()):
@@ -251,35 +256,26 @@ class LayerRefinement:
             self.peak_ratio[y, x] = ti.max(self.peak_ratio[y, x], ratio_here)
 
     @ti.kernel
-    def _residual_source(self):
+    def _finish(self, R: ti.i32, ratio: ti.f32, r: ti.i32, wide: ti.f32, d_max: ti.f32,
+                support: ti.f32):
+        """Steps 2 and 3 of a pass: the matches (:meth:`_select`); ``count``, the layer
+        pixels of each pixel's boxes of half-side ``r`` (plus ``wide`` times the ``4 r``
+        box); ``average``, the same boxes' layer-restricted sums of the weighted residual
+        and of the weights; the surface plus the average residual, clamped to [0, d_max]."""
+        self._select(R, ratio)
         for y, x in ti.ndrange(*self._pixels()):
+            fg = self.label[y, x] == 0
+            self.source[y, x] = ti.Vector([ti.select(fg, 1.0, 0.0), ti.select(fg, 0.0, 1.0),
+                                           0.0, 0.0])
+        self._boxes(r, wide)
+        for y, x in ti.ndrange(*self._pixels()):
+            self.count[y, x] = self.average[y, x]
             w = self.weight[y, x]
             fg = self.label[y, x] == 0
             v = w * self.residual[y, x]
             self.source[y, x] = ti.Vector([ti.select(fg, v, 0.0), ti.select(fg, 0.0, v),
                                            ti.select(fg, w, 0.0), ti.select(fg, 0.0, w)])
-
-    @ti.kernel
-    def _layer_source(self):
-        for y, x in ti.ndrange(*self._pixels()):
-            fg = self.label[y, x] == 0
-            self.source[y, x] = ti.Vector([ti.select(fg, 1.0, 0.0), ti.select(fg, 0.0, 1.0),
-                                           0.0, 0.0])
-
-    @ti.kernel
-    def _keep_count(self):
-        for y, x in ti.ndrange(*self._pixels()):
-            self.count[y, x] = self.average[y, x]
-
-    @ti.kernel
-    def _accumulate(self, weight: ti.f32):
-        """``average = box`` for weight 1, ``average += weight * box`` otherwise."""
-        for y, x in ti.ndrange(*self._pixels()):
-            self.average[y, x] = weight * self.box[y, x] + \
-                ti.select(weight < 1.0, self.average[y, x], 0.0)
-
-    @ti.kernel
-    def _apply(self, d_max: ti.f32, support: ti.f32):
+        self._boxes(r, wide)
         for y, x in ti.ndrange(*self._pixels()):
             lab = self.label[y, x]
             den = ti.max(self.average[y, x][2 + lab], support * self.count[y, x][lab])
@@ -288,23 +284,6 @@ class LayerRefinement:
                 s += self.average[y, x][lab] / den
             self.surface[y, x] = ti.min(ti.max(s, 0.0), d_max)
 
-    def _boxes(self, r):
-        """``average``: the box sums of ``source`` over the ``r`` box plus ``WIDE_WEIGHT``
-        times the ``4 r`` box."""
-        self.box_sum(r)
-        self._accumulate(1.0)
-        self.box_sum(4 * r)
-        self._accumulate(WIDE_WEIGHT)
-
-    def _smooth(self, r):
-        """``count``: the layer pixels of each pixel's boxes; ``average``: the
-        layer-restricted box sums of the weighted residual and of the weights."""
-        self._layer_source()
-        self._boxes(r)
-        self._keep_count()
-        self._residual_source()
-        self._boxes(r)
-
     def run(self, left, right, surface, foreground, occlusion, d_max):
         """Refine the left-view ``surface`` (f32 plane; clamped to ``[0, d_max]`` first) of
         the layers ``foreground`` (i32, 1 on the foreground) with ``occlusion`` (i32, 1
@@ -312,14 +291,9 @@ class LayerRefinement:
         ``left``, ``right``: RGB vector fields in [0, 1].  The refined map is left in
         ``surface``."""
         self.matching.setup(left, right)
-        self._load(surface, foreground, occlusion, float(d_max))
-        for R, window, smoothing in self.passes:
-            self._start_pass(R)
-            low, high = (int(v) for v in self.span.to_numpy())
+        for i, (R, window, smoothing) in enumerate(self.passes):
+            low, high = (int(v) for v in self._begin(surface, foreground, occlusion,
+                                                     float(d_max), int(i == 0), R))
             for d in range(max(low - R, 0), min(high + R, int(d_max)) + 1):
-                self._match_rows(left, right, d)
-                self._column_prefix(window)
-                self._store(d, R, window)
-            self._select(R, self.ratio)
-            self._smooth(smoothing)
-            self._apply(float(d_max), self.support)
+                self._sweep(left, right, d, R, window)
+            self._finish(R, self.ratio, smoothing, WIDE_WEIGHT, float(d_max), self.support)

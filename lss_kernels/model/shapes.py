@@ -71,6 +71,7 @@ class GlobalShapes:
         # the shapes at the last call of moved() and how far they have moved since
         self.reference = field(ti.f32, (2, NB))
         self.change = field(ti.f32, ())
+        pool.host(self.frame, self.theta)
         self.updated = field(ti.i32, (2,))   # the last fit changed the shape
         self.rows = field(ti.f32, (2,))
         # reduction levels: tiles of TILE x TILE children until one cell is left
@@ -91,7 +92,7 @@ class GlobalShapes:
         for one size, bit for bit."""
         f32 = np.float32
         inv_s = f32(self.inv_s)
-        self.frame.from_numpy(np.array([f32(-f32(self.cx)) * inv_s,
+        self.extent.pool.write(self.frame, np.array([f32(-f32(self.cx)) * inv_s,
                                         f32(-f32(self.cy)) * inv_s, inv_s], np.float32))
 
     @ti.func
@@ -122,11 +123,12 @@ class GlobalShapes:
         return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
 
     @ti.kernel
-    def moved(self, phi: ti.template()):
+    def moved(self, phi: ti.template()) -> ti.f32:
         """How far the shapes have moved since the last call, in cyclopean pixels: ``change``
         is the largest ``|Theta_j - reference_j|`` over the image, each pixel measured on its
         own layer's shape (Theta_1 where ``phi > 0``, else Theta_2); then ``reference`` <-
-        Theta (the stopping rule's second test, :mod:`lss_kernels.stopping`)."""
+        Theta (the stopping rule's second test, :mod:`lss_kernels.stopping`); returns
+        ``change``."""
         self.change[None] = 0.0
         for y, x in phi:
             if y < self.extent.height() and x < self.extent.width():
@@ -138,6 +140,7 @@ class GlobalShapes:
                 ti.atomic_max(self.change[None], ti.abs(dz))
         for j, a in self.theta:
             self.reference[j, a] = self.theta[j, a]
+        return self.change[None]
 
     @ti.func
     def _from_pixels(self, weights: ti.template(), target: ti.template(), out: ti.template()):
@@ -262,6 +265,11 @@ class GlobalShapes:
         giving pixel (y, x)'s row weights ``[w_fg, w_bg]`` (0 outside a region), computed
         as the pixels are summed (no weight planes): the solver's Eq. 8 weights, or
         :class:`WeightPlanes`.  One launch: the reduction's levels run in order."""
+        self.fit_func(weights, target)
+
+    @ti.func
+    def fit_func(self, weights: ti.template(), target: ti.template()):
+        """:meth:`fit`, for a kernel that runs it with other stages."""
         self._from_pixels(weights, target, self.tiles[0])
         for i in ti.static(range(1, len(self.tiles))):
             self._from_tiles(self.tiles[i - 1], self.tiles[i], i)
@@ -269,11 +277,11 @@ class GlobalShapes:
 
     def set(self, theta_fg, theta_bg):
         """Set both shapes from normalised-basis coefficients (cyclopean units)."""
-        self.theta.from_numpy(np.stack([theta_fg, theta_bg]).astype(np.float32))
+        self.extent.pool.write(self.theta, np.stack([theta_fg, theta_bg]).astype(np.float32))
 
     def pixel_coefficients(self, scale=1.0):
         """``(2, 6)`` coefficients over raw cyclopean pixel coordinates."""
-        th = self.theta.to_numpy()
+        th = self.extent.pool.read(self.theta)
         return np.stack([to_pixel_coefficients(t, self.H, self.W, scale) for t in th])
 
 

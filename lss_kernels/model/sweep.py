@@ -80,6 +80,7 @@ class BackgroundSweep:
         # at the fitted Theta_2 (k = C) and the pixels' count (k = C + 1)
         self.rows = pool.field(ti.f32, (Hb, self.C + 2), volume=True)
         self.totals = pool.field(ti.f32, (self.C + 2,), volume=True)
+        pool.host(self.totals)
 
     @ti.kernel
     def standardise(self, cost: ti.template()):
@@ -107,8 +108,17 @@ class BackgroundSweep:
         return (cost_at(cost, y, x, c, self.C) - self.centre[y, x]) * self.inv_spread[y, x]
 
     @ti.kernel
+    def _sweep(self, cost: ti.template(), shapes: ti.template(), phi: ti.template(),
+               phi_plus: ti.template(), consensus: ti.template(), near: ti.f32):
+        """The sweep's sums in one launch (:meth:`_select`, :meth:`_accumulate`,
+        :meth:`_reduce`)."""
+        self._select(cost, shapes, phi, phi_plus, consensus, near)
+        self._accumulate(cost)
+        self._reduce()
+
+    @ti.func
     def _select(self, cost: ti.template(), shapes: ti.template(), phi: ti.template(),
-                phi_plus: ti.template(), consensus: ti.template(), near: ti.f32):
+                phi_plus: ti.template(), consensus: ti.template(), near):
         """``swept``: 1 on the visible background away from Theta_1's consensus, else 0;
         ``at_theta2``: there, the standardised cost at the fitted Theta_2."""
         height, width = self.extent.height(), self.extent.width()
@@ -124,7 +134,7 @@ class BackgroundSweep:
                 self.swept[y, x] = w
                 self.at_theta2[y, x] = z
 
-    @ti.kernel
+    @ti.func
     def _accumulate(self, cost: ti.template()):
         """``rows``: per row, the swept pixels' standardised cost summed at every candidate,
         their ``at_theta2`` summed, and their count (a thread per row and column of sums)."""
@@ -143,7 +153,7 @@ class BackgroundSweep:
                         s += self.swept[y, x]
                 self.rows[y, k] = s
 
-    @ti.kernel
+    @ti.func
     def _reduce(self):
         """``totals``: ``rows`` summed over the image's rows, in row order."""
         height = self.extent.height()
@@ -153,11 +163,12 @@ class BackgroundSweep:
                 t += self.rows[y, k]
             self.totals[k] = t
 
-    @ti.kernel
-    def _set_plane(self, shapes: ti.template(), c: ti.f32):
+    def _set_plane(self, shapes, c):
         """Theta_2 := the fronto-parallel plane at cyclopean disparity ``c``."""
-        for a in range(6):
-            shapes.theta[1, a] = c if a == 5 else 0.0
+        theta = self.extent.pool.read(shapes.theta)
+        theta[1] = 0.0
+        theta[1, 5] = c
+        self.extent.pool.write(shapes.theta, theta)
 
     def run(self, iteration, params, cost, shapes, phi, phi_plus, consensus):
         """After the fit of iteration ``iteration`` (1-based), when a sweep is :func:`due`:
@@ -166,10 +177,8 @@ class BackgroundSweep:
         None when Theta_2 is kept.  Reads ``c_max + 2`` numbers back to the host."""
         if not due(iteration, params):
             return None
-        self._select(cost, shapes, phi, phi_plus, consensus, NEAR)
-        self._accumulate(cost)
-        self._reduce()
-        c = choose_plane(self.totals.to_numpy().astype(np.float64), params.background_sweep,
+        self._sweep(cost, shapes, phi, phi_plus, consensus, NEAR)
+        c = choose_plane(self.extent.pool.read(self.totals).astype(np.float64), params.background_sweep,
                          self.H * self.W)
         if c is not None:
             self._set_plane(shapes, c)
