@@ -381,7 +381,8 @@ def test_integer_messages_without_subpixel_refinement(pair):
 
 
 def test_normal_equation_reduction_matches_lstsq(ti_arch):
-    from lss_kernels.model.shapes import GlobalShapes, WeightPlanes, basis, to_pixel_coefficients
+    from lss_kernels.model.quadratic import basis
+    from lss_kernels.model.shapes import GlobalShapes, WeightPlanes, to_pixel_coefficients
     rng = np.random.default_rng(7)
     h, w = 41, 57   # several tiles, ragged edges
     pool = FieldPool()
@@ -631,7 +632,8 @@ def test_moved_measures_each_pixel_on_its_own_layers_shape(ti_arch):
     """``GlobalShapes.moved``: the largest |Theta_j - reference_j| over the image, with j the
     pixel's own layer (0 where phi > 0), against numpy; then the reference is Theta."""
     from lss_kernels.model.levelset import LevelSet
-    from lss_kernels.model.shapes import GlobalShapes, basis
+    from lss_kernels.model.quadratic import basis
+    from lss_kernels.model.shapes import GlobalShapes
     pool = FieldPool()
     ls = LevelSet(pool, 9, 14, Params())
     shapes = GlobalShapes(pool, 9, 14)

@@ -21,7 +21,7 @@ and removes stray matches.  Then:
   (``BOX_SPILL``) when the centre has no confident match, when its region in the box is
   smaller than ``MIN_AREA`` of the image or ``MIN_BOX_COVER`` of the box (the centre is off
   the object, as in the box of an L), or when the left image is periodic
-  (:mod:`lss_kernels.periodicity`, which the caller applies);
+  (:mod:`lss_kernels.checks.periodicity`, which the caller applies);
 * ``"auto"``: the near pixels that also stand more than ``CONTRAST`` above the background
   surface, a quadratic fitted to d-bar robustly (:func:`background_fit`, a stand-in for
   the model's Theta_2 before the object is known): a floor or a wall whose depth bulges
@@ -40,7 +40,7 @@ and removes stray matches.  Then:
   is then the object, when it holds ``NEST_SHARE`` of it (a large object's bulge above
   its own quadratic holds less; ``docs/design.md``), and regrows over pixels ``CONTRAST``
   above that fit.  On a periodic left image ``auto`` has no ellipse to fall back on: it
-  goes on, and the solver warns :class:`~lss_kernels.recovery.UnreliableStartWarning`.
+  goes on, and the solver warns :class:`~lss_kernels.start_types.UnreliableStartWarning`.
 
 A found region starts phi widened by ``SPILL`` pixels: a start that spills over the object is
 recovered by the evolution, one that covers only part of it is not always (paper15 scene 4:
@@ -58,6 +58,7 @@ import taichi as ti
 
 from ..kernels.median import Assign, MedianFilter
 from ..start_types import AUTO, Box, InitError, Point
+from .quadratic import basis
 
 # the passes of InitialRegion._region_pass
 _MARK_NEAR, _KEEP_ABOVE, _PROPAGATE, _SEED, _GROW, _OPEN = range(1, 7)
@@ -118,8 +119,7 @@ def pick_region(labels: np.ndarray, min_area: int):
 def _basis(x, y, H: int, W: int) -> np.ndarray:
     """``(x^2, xy, y^2, x, y, 1)`` of the normalised coordinates ``x / W - 1/2``,
     ``y / H - 1/2`` (float64, the last axis)."""
-    xn, yn = np.asarray(x, np.float64) / W - 0.5, np.asarray(y, np.float64) / H - 0.5
-    return np.stack([xn * xn, xn * yn, yn * yn, xn, yn, np.ones_like(xn)], axis=-1)
+    return basis(np.asarray(x, np.float64) / W - 0.5, np.asarray(y, np.float64) / H - 0.5)
 
 
 def background_fit(d: np.ndarray, band: float = BACKGROUND_BAND, rounds: int = FIT_ROUNDS,
@@ -137,15 +137,15 @@ def background_fit(d: np.ndarray, band: float = BACKGROUND_BAND, rounds: int = F
         return None, {"values": int(xs.size)}
     step = max(1, xs.size // samples)
     ys, xs = ys[::step], xs[::step]
-    basis, value = _basis(xs, ys, H, W), d[ys, xs].astype(np.float64)
+    rows, value = _basis(xs, ys, H, W), d[ys, xs].astype(np.float64)
     inliers = np.ones(value.shape, bool)
     if start is not None and start[ys, xs].sum() >= 6:
         inliers = start[ys, xs]
     for _ in range(rounds + 1):
         if inliers.sum() < 6:
             break
-        coefficients = np.linalg.lstsq(basis[inliers], value[inliers], rcond=None)[0]
-        residual = np.abs(value - basis @ coefficients)
+        coefficients = np.linalg.lstsq(rows[inliers], value[inliers], rcond=None)[0]
+        residual = np.abs(value - rows @ coefficients)
         width = max(band, SPREAD * 1.4826 * float(np.median(residual[inliers])))
         inliers = residual <= width
     return coefficients, {"values": int(value.size), "inliers": float(inliers.mean()),
@@ -395,7 +395,7 @@ class InitialRegion:
 
         ``mean`` and ``precision`` are the first consensus (cyclopean pixels); ``periodic``
         the share of the left image's tiles that are periodic when the image counts as
-        periodic (:mod:`lss_kernels.periodicity`), else 0: a box's start then ignores the
+        periodic (:mod:`lss_kernels.checks.periodicity`), else 0: a box's start then ignores the
         consensus, and ``auto`` records a warning in :attr:`info` (the caller issues it)."""
         self.load(mean, precision)
         self.smooth()

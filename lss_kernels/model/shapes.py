@@ -13,7 +13,7 @@ weighted rows, or a singular system, keeps its previous shape.
 import numpy as np
 import taichi as ti
 
-__all__ = ["GlobalShapes", "WeightPlanes", "to_pixel_coefficients", "basis"]
+__all__ = ["GlobalShapes", "WeightPlanes", "to_pixel_coefficients"]
 
 NB = 6            # basis size
 NT = 21 + 6 + 1   # upper triangle of U U^T, U d, row count
@@ -25,11 +25,6 @@ _EXPONENTS = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)]  # U_i = x^p y^q: 
 def _monomial(a, b):
     """(p, q) of U_a U_b = x^p y^q."""
     return _EXPONENTS[a][0] + _EXPONENTS[b][0], _EXPONENTS[a][1] + _EXPONENTS[b][1]
-
-
-def basis(xn, yn):
-    """The paper's basis {x^2, xy, y^2, x, y, 1} at (normalised) coordinates."""
-    return np.stack([xn * xn, xn * yn, yn * yn, xn, yn, np.ones_like(xn)], axis=-1)
 
 
 def to_pixel_coefficients(theta, height, width, scale=1.0):
