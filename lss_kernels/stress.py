@@ -575,13 +575,21 @@ def multi_specs(seed: int = 0, size: str = "medium") -> list:
     width, height = MULTI_SIZES[size]
     scale = width / MULTI_SIZES["photo"][0]
     rng = np.random.default_rng([int(seed), 2])
+    return _named_specs("multi", _multi_scenes(rng), _multi_placed, rng, seed, size,
+                        width=width, height=height, scale=scale)
+
+
+def _named_specs(family, scenes, place, rng, seed, size, width, height, scale, **extra):
+    """``(FAMILY_VARIANT, keywords)`` of a set's scenes, each placed by ``place(params, rng,
+    scale)`` and given the image's size, its seed and its meta (``extra``: more keywords)."""
     specs = []
-    for variant, description, params in _multi_scenes(rng):
-        keywords = _multi_placed(params, rng, scale)
-        keywords.update(width=width, height=height, seed=int(seed) * 1000 + len(specs),
-                        meta={"family": "multi", "description": description,
+    for variant, description, params in scenes:
+        keywords = place(params, rng, scale)
+        keywords.update(width=width, height=height, **extra,
+                        seed=int(seed) * 1000 + len(specs),
+                        meta={"family": family, "description": description,
                               "stress_seed": int(seed), "size": size})
-        specs.append((f"multi_{variant}", keywords))
+        specs.append((f"{family}_{variant}", keywords))
     return specs
 
 
@@ -595,15 +603,8 @@ def periodic_specs(seed: int = 0, size: str = "medium") -> list:
     width, height = SIZES[size]
     scale = width / SIZES["medium"][0]
     rng = np.random.default_rng([int(seed), 3])
-    specs = []
-    for variant, description, params in _periodic_hard(rng):
-        keywords = _placed(params, rng, scale)
-        keywords.update(width=width, height=height, d_max_step=_D_MAX_STEP,
-                        seed=int(seed) * 1000 + len(specs),
-                        meta={"family": "periodic", "description": description,
-                              "stress_seed": int(seed), "size": size})
-        specs.append((f"periodic_{variant}", keywords))
-    return specs
+    return _named_specs("periodic", _periodic_hard(rng), _placed, rng, seed, size,
+                        width=width, height=height, scale=scale, d_max_step=_D_MAX_STEP)
 
 
 def write_stress_set(out_dir, seed: int = 0, size: str = "medium", random: int = 0,
