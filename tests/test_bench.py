@@ -247,9 +247,10 @@ def test_kernel_profile_sums_each_kernels_loops_per_iteration():
 
 @pytest.mark.slow
 def test_kernel_profile_times_the_iterations_kernels(ti_arch):
-    """A profiled run of the tiny scene: the Eq. 2 step and the derivatives launch once per
-    iteration and take time; the profiler is switched off again afterwards (its kernels
-    compile apart)."""
+    """A profiled run of the tiny scene: the Eq. 2 step, the derivatives (with phi(x +
+    delta_theta)), the upward pass, the messages with the consensus and the ray cast with B
+    (model/iteration.py's fused stages) launch once per iteration and take time; the profiler
+    is switched off again afterwards (its kernels compile apart)."""
     from lss_kernels.kernels import backend
     kp = _demo("kernel_profile")
     try:
@@ -257,7 +258,7 @@ def test_kernel_profile_times_the_iterations_kernels(ti_arch):
     finally:
         backend.init(arch=ti_arch, kernel_profiler=False)
     by_kernel = {r["kernel"]: r for r in rows}
-    for name in ("_step", "_derivatives", "upward", "downward"):
+    for name in ("_step", "derivatives", "upward", "consensus", "geometry"):
         assert by_kernel[name]["launches"] == 1.0 and by_kernel[name]["ms"] > 0
     assert wall > 0 and sum(r["share"] for r in rows) == pytest.approx(1.0)
 

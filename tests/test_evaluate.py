@@ -143,6 +143,7 @@ def test_process_pool_matches_in_process(dataset, tmp_path, capsys):
 @pytest.mark.slow
 def test_lss_scenes_of_one_size_share_a_solver_and_match_a_fresh_solve(dataset, tmp_path,
                                                                        monkeypatch):
+    from lss_kernels import solve
     from lss_kernels import solver as solver_module
     from lss_kernels.io import load_scene
     from lss_kernels.metrics import score
@@ -164,8 +165,8 @@ def test_lss_scenes_of_one_size_share_a_solver_and_match_a_fresh_solve(dataset, 
     scene = load_scene(dataset / row["scene"])
     init, frame = ((scene.init_ellipse_cyclopean, "cyclopean")
                    if scene.init_ellipse_cyclopean is not None else (scene.init_ellipse, "left"))
-    result = solver_module.solve(scene.left, scene.right, scene.d_max, tuple(init),
-                                 params=FAST, init_frame=frame)
+    result = solve(scene.left, scene.right, scene.d_max, tuple(init), params=FAST,
+                   init_frame=frame)
     s = score(result.disparity, result.occlusion, scene)
     assert (row["occ_f1"], row["bad4"]) == (s["occ_f1"], s["bad4"])
 
