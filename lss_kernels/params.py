@@ -21,6 +21,32 @@ def c_max(d_max) -> int:
     return max(1, int(math.ceil(float(d_max) / 2.0)))
 
 
+# Constants of the authors' release that no scene needs changed: the scale of phi and the
+# filters and clips of the Eq. 2 step (lss_kernels.model.levelset), and B_occ's detector
+# (lss_kernels.model.costs); the refinement's peak-ratio and support thresholds
+# (lss_kernels.model.refine).
+
+#: phi is a signed distance (in pixels) times this factor (the release: 0.01).
+PHI_SCALE = 0.01
+#: Sigma (pixels) of the Gaussian-derivative filters for the curvature and the normal.
+CURVATURE_SIGMA = 4.0
+#: |kappa| is clipped to this.
+CURVATURE_CLIP = 10.0
+#: The boundary term B kappa + N . grad B is clipped to [-BOUNDARY_CLIP, BOUNDARY_CLIP].
+BOUNDARY_CLIP = 1.0
+#: Sigma (pixels) of the epipolar Gaussian derivative of the cost volume behind B_occ.
+OCC_SIGMA = 3.0
+#: Threshold on |dM/dx| that marks likely occlusion boundaries for B_occ.
+OCC_THRESHOLD = 0.02
+#: Peak-ratio threshold of a distinct match in the refinement (its cost below this times the
+#: best candidate's that is not its neighbour).
+REFINE_RATIO = 0.9
+#: Fraction of a residual box's layer pixels that must hold a distinct match for its average
+#: residual to count fully; below it the residual shrinks in proportion, so that a
+#: textureless layer, whose few distinct matches are noise, keeps its quadratic.
+REFINE_SUPPORT = 0.03
+
+
 @dataclass(frozen=True)
 class Params:
     """Every tunable of the solver.
@@ -29,8 +55,9 @@ class Params:
     ----------
     dt : float
         Time step of the level-set descent (Eq. 2).
-    alpha_occ, alpha_mono, alpha_const : float
-        alpha_1..alpha_3 of the boundary weight B = a1 B_occ + a2 B_mono + a3 (Eq. 1).
+    alpha : (float, float, float)
+        ``(alpha_1, alpha_2, alpha_3)`` of the boundary weight B = alpha_1 B_occ + alpha_2
+        B_mono + alpha_3 (Eq. 1).
     mu : float
         Weight of the boundary-length term (Eq. 1, Eq. 2).
     beta : float
@@ -70,25 +97,13 @@ class Params:
         Stop after this many consecutive quiet windows.  Windows before ``min_iterations``
         count towards it: the rule can fire at ``min_iterations``.  With the defaults paper15
         stops at a median of 140 iterations (``docs/design.md``, the stopping rule).
-    phi_scale : float
-        phi is a signed distance (in pixels) times this factor (the release: 0.01).
     narrow_band : float
         Eq. 2 moves phi only within this many pixels of the boundary (|phi| <=
-        ``narrow_band * phi_scale``); 0: everywhere, as the paper's delta_eps does, whose
+        ``narrow_band * PHI_SCALE``); 0: everywhere, as the paper's delta_eps does, whose
         tail lets a weak, noisy data term open holes far inside a region
         (:mod:`lss_kernels.model.levelset`).  Half a pixel beyond a whole number: the
-        re-initialised phi is ``phi_scale`` times whole-pixel distances, which would sit on
+        re-initialised phi is ``PHI_SCALE`` times whole-pixel distances, which would sit on
         the band's edge.
-    curvature_sigma : float
-        Sigma of the Gaussian-derivative filters for curvature and normal (pixels).
-    curvature_clip : float
-        |kappa| is clipped to this.
-    boundary_clip : float
-        B kappa + N . grad B is clipped to [-boundary_clip, boundary_clip].
-    occ_sigma : float
-        Sigma of the epipolar Gaussian derivative behind B_occ (pixels).
-    occ_threshold : float
-        Threshold on |dM/dx| that marks likely occlusion boundaries for B_occ.
     mono_threshold : float
         Threshold on the Sobel magnitude that marks image edges for B_mono (one value for
         every scene).
@@ -114,13 +129,6 @@ class Params:
         Per refinement pass: the candidate half-range around the layer's surface, the
         half-side of the layer-restricted matching window and of the residual's averaging
         box (left-view pixels).
-    refine_ratio : float
-        Peak-ratio threshold of a distinct match in the refinement (in (0, 1]).
-    refine_support : float
-        Fraction of a residual box's layer pixels that must hold a distinct match for its
-        average residual to count fully; below it the residual shrinks in proportion, so a
-        textureless layer, whose few distinct matches are noise, keeps its quadratic (in
-        [0, 1]; 0: any match counts fully).
     strip_window : (int, int)
         ``(near, far)``: after the refinement every occluded strip of the output is measured
         again, as the jump from the foreground at its edge to the background where the right
@@ -168,9 +176,7 @@ class Params:
     """
 
     dt: float = 0.2
-    alpha_occ: float = 0.2
-    alpha_mono: float = 0.8
-    alpha_const: float = 0.1
+    alpha: tuple = (0.2, 0.8, 0.1)
     mu: float = 4.0
     beta: float = 0.4
     patch_sizes: tuple = (3, 9, 18)
@@ -182,21 +188,13 @@ class Params:
     stop_shift: float = 0.1
     stop_surface: float = 1.0
     stop_patience: int = 1
-    phi_scale: float = 0.01
     narrow_band: float = 10.5
-    curvature_sigma: float = 4.0
-    curvature_clip: float = 10.0
-    boundary_clip: float = 1.0
-    occ_sigma: float = 3.0
-    occ_threshold: float = 0.02
     mono_threshold: float = 0.08
     shape_weight_power: int = 2
     matching_cost: str = "ad"
     subpixel_messages: bool = True
     refine: bool = True
     refine_passes: tuple = ((24, 7, 8), (4, 4, 2))
-    refine_ratio: float = 0.9
-    refine_support: float = 0.03
     strip_window: tuple = (6, 20)
     message_ambiguity: float = 0.0
     recover: bool = True
@@ -226,8 +224,9 @@ class Params:
         nonneg = lambda v: finite(v) and v >= 0
         posint = lambda v: isinstance(v, int) and v >= 1
         need("dt", lambda v: pos(v) and v <= 10, "a number in (0, 10]")
-        for name in ("alpha_occ", "alpha_mono", "alpha_const"):
-            need(name, nonneg, "a finite number >= 0")
+        need("alpha", lambda v: isinstance(v, tuple) and len(v) == 3 and all(
+            nonneg(a) and not isinstance(a, bool) for a in v),
+            "a tuple of three finite numbers >= 0")
         need("mu", nonneg, "a finite number >= 0")
         need("beta", nonneg, "a finite number >= 0")
         need("background_sweep", nonneg, "a finite number >= 0")
@@ -244,13 +243,7 @@ class Params:
         need("stop_shift", nonneg, "a finite number of pixels >= 0 (0: no stopping rule)")
         need("stop_surface", nonneg, "a finite number of pixels >= 0 (0: no surface test)")
         need("stop_patience", posint, "an integer >= 1")
-        need("phi_scale", pos, "a finite number > 0")
         need("narrow_band", nonneg, "a finite number of pixels >= 0 (0: no band)")
-        need("curvature_sigma", lambda v: pos(v) and v <= 16, "a number in (0, 16]")
-        need("curvature_clip", pos, "a finite number > 0")
-        need("boundary_clip", pos, "a finite number > 0")
-        need("occ_sigma", lambda v: pos(v) and v <= 16, "a number in (0, 16]")
-        need("occ_threshold", pos, "a finite number > 0")
         need("mono_threshold", pos, "a finite number > 0")
         need("shape_weight_power", lambda v: v in (1, 2), "1 (the paper) or 2 (the release)")
         need("matching_cost", lambda v: v in ("ad", "ad_census"), "'ad' or 'ad_census'")
@@ -261,8 +254,6 @@ class Params:
                 isinstance(k, int) and not isinstance(k, bool) and 1 <= k <= 64 for k in p)
             for p in v), "a tuple of (range, window, smoothing) triples of integers in "
             "[1, 64]")
-        need("refine_ratio", lambda v: finite(v) and 0 < v <= 1, "a number in (0, 1]")
-        need("refine_support", lambda v: finite(v) and 0 <= v <= 1, "a number in [0, 1]")
         need("strip_window", lambda v: v == (0, 0) or (
             isinstance(v, tuple) and len(v) == 2
             and all(isinstance(k, int) and not isinstance(k, bool) for k in v)
@@ -299,6 +290,7 @@ class Params:
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
+        d["alpha"] = list(self.alpha)
         d["patch_sizes"] = list(self.patch_sizes)
         d["refine_passes"] = [list(p) for p in self.refine_passes]
         d["strip_window"] = list(self.strip_window)

@@ -41,7 +41,7 @@ from .model.messages import Messages
 from .model.offset import SHIFT, model_pair, search_range, to_user_left
 from .model.occlusion import OcclusionGeometry
 from .model.refine import LayerRefinement
-from .params import c_max
+from .params import PHI_SCALE, c_max
 from .confidence import of_solver
 from .result import Result
 from .model.shapes import GlobalShapes
@@ -154,8 +154,8 @@ class Solver:
         if self.front is not None:
             self.levelset.hidden = self.front.hidden
             self.initialiser.bridge_gap = BRIDGE_GAP
-        self.refinement = (LayerRefinement(pool.annex(), H, W, p.refine_passes, p.refine_ratio,
-                                           p.refine_support) if p.refine else None)
+        self.refinement = (LayerRefinement(pool.annex(), H, W, p.refine_passes)
+                           if p.refine else None)
         # what the host reads and writes of the pool (FieldPool.host)
         h = self.hierarchy
         pool.host(self.left, self.right, h.consensus_mean, h.precision,
@@ -338,7 +338,7 @@ class Solver:
                                self.occ.phi_plus, hier.consensus_mean)
         if self.front is not None:
             self.front.update(hier.matching_cost, self.c_max, self.shapes, ls.phi,
-                              -FRONT_REACH * p.phi_scale, 0.5 * p.front_margin)
+                              -FRONT_REACH * PHI_SCALE, 0.5 * p.front_margin)
         t = self._stage("shapes", t)
         if self.profile:
             self.occ.compute(self.shapes, ls.phi_x, 1)

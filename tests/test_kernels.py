@@ -7,7 +7,7 @@ from lss_kernels.reference import kernels as ref
 from lss_kernels.kernels.backend import FieldPool
 from lss_kernels.model.matching import MatchingCost
 from lss_kernels.model.messages import Messages
-from lss_kernels.params import Params
+from lss_kernels.params import BOUNDARY_CLIP, CURVATURE_CLIP, CURVATURE_SIGMA, Params
 
 H, W, C = 22, 34, 7
 SIZES = (3, 9, 18)
@@ -800,9 +800,9 @@ def _check_step(phi, bands, lanes=None, monkeypatch=None):
     occ.delta_theta.from_numpy(occ.extent.padded(dtheta))
     cost.from_numpy(volume)
     kappa, n_x, n_y = ref.curvature(ref.gaussian_derivatives(phi.astype(np.float64),
-                                                             p.curvature_sigma),
-                                    p.curvature_clip)
-    b_x, b_y = ref.gaussian_derivatives(b_map.astype(np.float64), p.curvature_sigma)[:2]
+                                                             CURVATURE_SIGMA),
+                                    CURVATURE_CLIP)
+    b_x, b_y = ref.gaussian_derivatives(b_map.astype(np.float64), CURVATURE_SIGMA)[:2]
     for band in bands:
         ls.band = band
         ls.derivatives()
@@ -811,7 +811,7 @@ def _check_step(phi, bands, lanes=None, monkeypatch=None):
         ls.boundary_weight(given_b, shapes)
         ls._step(cost, C, shapes, occ, p.dt, p.mu, band)
         want = ref.levelset_step(phi, volume, th1, th2, dtheta, b_map, b_x, b_y, kappa, n_x,
-                                 n_y, p.dt, p.mu, p.boundary_clip, band)
+                                 n_y, p.dt, p.mu, BOUNDARY_CLIP, band)
         got = ls.extent.image(ls.phi_next)
         assert np.abs(got - phi).max() > 0.05      # the step moves phi
         np.testing.assert_allclose(got, want, atol=1e-5)

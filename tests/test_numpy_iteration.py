@@ -1,7 +1,7 @@
 """The numpy specification of one iteration against Solver.step().
 
 Tolerances: the kernels work in float32 (eps 1.2e-7), the numpy specification in float64, from
-the same float32 state.  phi is O(0.01-0.3) here (phi_scale 0.01 x a distance of a few pixels)
+the same float32 state.  phi is O(0.01-0.3) here (PHI_SCALE 0.01 x a distance of a few pixels)
 and one step changes it by dt x O(1) x 1/pi; the 29-tap Gaussian-derivative filters and the
 per-pixel sums keep float32 round-off near 1e-6 of the values, so 1e-4 (absolute, phi) leaves a
 factor ~10 of margin after several iterations (observed: ~1e-6 after one, <1e-4 after six).
@@ -55,7 +55,7 @@ def test_one_and_several_iterations_match_the_kernels(solver):
     own state before it.  Each step is compared, not six chained ones: a pixel whose phi
     ends a step at round-off level may take either sign in float32 and float64, and the next
     signed-distance re-initialisation turns that into a pixel of distance for its
-    neighbours (phi_scale x 1 = 0.01 per pixel; 0.06 seen after six chained iterations when
+    neighbours (PHI_SCALE x 1 = 0.01 per pixel; 0.06 seen after six chained iterations when
     a change of rounding order in the messages moved Theta's fit by 3e-4): the chain would
     test round-off luck, not the iteration."""
     start = npi.state_from_solver(solver)

@@ -26,9 +26,8 @@ def test_paper_differs_from_the_defaults_exactly_in_what_lies_beyond_the_paper()
 
 def test_paper_keeps_section_4s_values_the_ad_cost_and_no_option_of_the_recovery():
     paper = Params.paper()
-    assert (paper.dt, paper.alpha_occ, paper.alpha_mono, paper.alpha_const, paper.mu,
-            paper.beta, paper.reinit_every, paper.median_size) == (0.2, 0.2, 0.8, 0.1, 4.0,
-                                                                   0.4, 10, 7)
+    assert (paper.dt, paper.alpha, paper.mu, paper.beta, paper.reinit_every,
+            paper.median_size) == (0.2, (0.2, 0.8, 0.1), 4.0, 0.4, 10, 7)
     assert paper.matching_cost == "ad" and paper.message_ambiguity == 0.0
     assert paper.patch_sizes == (3, 9, 18) and paper.max_iterations == 1500
 

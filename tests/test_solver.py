@@ -5,6 +5,7 @@ import taichi as ti
 
 from lss_kernels import Params, Solver, solve
 from lss_kernels.metrics import score
+from lss_kernels.params import OCC_SIGMA, OCC_THRESHOLD
 from lss_kernels.scenes import make_scene
 
 
@@ -254,11 +255,11 @@ def test_boundary_costs_match_a_numpy_reference(ti_arch):
     m = solver.hierarchy.levels[0].margin
     cost = solver.hierarchy.matching_cost.to_numpy()[m:m + H, m:m + W].astype(np.float64)
 
-    g, _, _ = gaussian_taps(params.occ_sigma, int(math.ceil(4 * params.occ_sigma)))
+    g, _, _ = gaussian_taps(OCC_SIGMA, int(math.ceil(4 * OCC_SIGMA)))
     dg = np.zeros_like(g)
     dg[1:-1] = (g[2:] - g[:-2]) / 2.0
     slope = _correlate(_correlate(cost, g, 0), dg[::-1], 1)
-    features = np.abs(slope) > params.occ_threshold
+    features = np.abs(slope) > OCC_THRESHOLD
     assert 0 < features.sum() < features.size
     dist = ndimage.distance_transform_edt(~features)
     np.testing.assert_allclose(solver.extent.image(solver.costs.b_occ),

@@ -129,9 +129,10 @@ def param_changes(items, defaults) -> dict:
         current = getattr(defaults, name)
         try:
             if isinstance(current, tuple):
-                # "3,9,18"; nested tuples as "24:9:8,4:4:2"
+                # "3,9,18"; nested tuples as "24:9:8,4:4:2"; numbers as the default's
+                number = float if any(isinstance(k, float) for k in current) else int
                 changes[name] = tuple(tuple(int(k) for k in v.split(":")) if ":" in v
-                                      else int(v) for v in value.split(","))
+                                      else number(v) for v in value.split(","))
             elif isinstance(current, bool):
                 if value.lower() not in ("true", "false", "1", "0"):
                     raise ValueError(value)

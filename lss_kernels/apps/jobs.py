@@ -253,6 +253,7 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None, calib
     view), drawn on ``overlay.png``; ``calib``: a calibration for depth.pfm and the
     clouds."""
     from .. import io, viz
+    from ..params import REFINE_RATIO, REFINE_SUPPORT
     out_dir = os.fspath(out_dir)
     parent = os.path.dirname(os.path.abspath(out_dir)) or "."
     os.makedirs(parent, exist_ok=True)
@@ -282,8 +283,7 @@ def write_outputs(out_dir, result, left, params, extra=None, initial=None, calib
                                    "cyclopean pixel coordinates",
                        refinement=dict(enabled=params.refine,
                                        passes=[list(p) for p in params.refine_passes],
-                                       ratio=params.refine_ratio,
-                                       support=params.refine_support,
+                                       ratio=REFINE_RATIO, support=REFINE_SUPPORT,
                                        seconds=round(result.timings.get("refine", 0.0), 4)),
                        background_sweep=sweep_summary(result.history),
                        layers=layer_summary(result),

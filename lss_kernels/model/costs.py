@@ -4,13 +4,13 @@ The matching cost M and its patch levels live in :mod:`lss_kernels.model.hierarc
 upward pass's first product).  Here:
 
 * ``B_occ(x, y, c)``: small where the matching cost changes abruptly along the epipolar line:
-  |x-derivative of a Gaussian (sigma = ``occ_sigma``)| of the size-3 cost volume, thresholded,
+  |x-derivative of a Gaussian (sigma = ``OCC_SIGMA``)| of the size-3 cost volume, thresholded,
   then the 3-D Euclidean distance to the nearest above-threshold voxel, normalised to [0, 1].
 * ``B_mono(x, y, c)``: small where both images have an intensity edge at the projections of
   the scene point (x, y, c): with e(.) = 0.5 (1 - dist_to_edge / max dist) per image
   (0.5 on an edge, 0 far from edges), ``B_mono = 1 - e_L(x + c) - e_R(x - c)``; edges are
   Sobel magnitudes (grey, Sobel / 8) above ``mono_threshold``.
-* ``B = alpha_occ B_occ + alpha_mono B_mono + alpha_const``, read at Theta_1(x, y) with linear
+* ``B = alpha_1 B_occ + alpha_2 B_mono + alpha_3`` (``Params.alpha``), read at Theta_1(x, y) with linear
   interpolation between integer disparities.
 
 Frame: cyclopean; volumes ``(H, W, c_max)`` indexed ``[y, x, c - 1]``.  Planes and volumes
@@ -25,6 +25,7 @@ import taichi as ti
 from ..kernels.backend import ROWS_DISPARITIES_COLUMNS
 from ..kernels.distance import INF, DistanceTransform
 from ..kernels.filters import gaussian_taps
+from ..params import OCC_SIGMA, OCC_THRESHOLD
 
 __all__ = ["BoundaryCosts"]
 
@@ -208,9 +209,8 @@ class BoundaryCosts:
     def build(self, cost_level1, left, right, params):
         """Everything B needs, once per solve: B_occ, then the edge scores e_L, e_R of the
         two images (``(H, W)`` vector fields in [0, 1]) for B_mono."""
-        self.extent.pool.write(self.alpha, np.array([params.alpha_occ, params.alpha_mono,
-                                                     params.alpha_const]))
-        self._occ_distances(cost_level1, params.occ_sigma, params.occ_threshold)
+        self.extent.pool.write(self.alpha, np.array(params.alpha))
+        self._occ_distances(cost_level1, OCC_SIGMA, OCC_THRESHOLD)
         t, run = float(params.mono_threshold), self._around_transforms
         run(left, right, self._dist2, 1, -1, 0, t)    # B_occ; the left image's edges
         self._edt2.run(self._dist2, (self.H, self.W))

@@ -17,7 +17,7 @@ object's pixels beside it: its largest patches straddle both).  A pixel is in fr
 * its cost is clearly below the costs at both surfaces: ``min(M(Theta_1), M(Theta_2)) -
   M(c*) > COST_GAP`` (neither the object nor the background explains it; a periodic
   background, whose matches repeat, is explained by Theta_2 as well as by any tooth);
-* it lies on the object or within ``REACH`` pixels of it (phi > -REACH phi_scale): what
+* it lies on the object or within ``REACH`` pixels of it (phi > -REACH PHI_SCALE): what
   stands in front of the object matters where it covers the object or its band; far from
   it, a layer read from single matches would only feed on the background's ambiguities
   (a striped wall whose pixels left Theta_2's fit would move Theta_2 and leave more);

@@ -6,8 +6,8 @@
     D(x, y) = H(phi) Theta_1(x, y) + (1 - H(phi)) Theta_2(x, y)                      (Eq. 3)
 
 with delta_eps(phi) = (1/pi) / (1 + phi^2) inside a narrow band around the boundary (|phi| <=
-``narrow_band`` pixels times ``phi_scale``) and 0 outside it, kappa = div(grad phi / |grad phi|)
-and N = grad phi / |grad phi|.  phi being ``phi_scale`` (0.01) times a distance, delta_eps alone
+``narrow_band`` pixels times ``PHI_SCALE``) and 0 outside it, kappa = div(grad phi / |grad phi|)
+and N = grad phi / |grad phi|.  phi being ``PHI_SCALE`` (0.01) times a distance, delta_eps alone
 falls only to half its peak 100 px from the boundary: every pixel of the image moves, and where
 the data term is weak and noisy (a dark, low-contrast layer) its small imbalances add up over
 hundreds of iterations until the sign flips far inside a region, opening holes in an object
@@ -15,12 +15,12 @@ that no boundary ever reached.  Inside the band the step is the paper's; outside
 its value (a narrow-band level set, Adalsteinsson and Sethian 1995), so regions change only by
 moving their boundary; kappa, N, B and grad B are computed only in the blocks of pixels whose
 step reads them (``_mark_band``), phi_x everywhere (the ray cast reads its sign).
-Derivatives are separable Gaussian-derivative filters (``curvature_sigma``, symmetric
+Derivatives are separable Gaussian-derivative filters (``CURVATURE_SIGMA``, symmetric
 borders: the Neumann condition of Eq. 2; :mod:`lss_kernels.kernels.filters`); kappa is clipped
-to +-``curvature_clip`` and the boundary term to +-``boundary_clip``.  M is the size-3 patch cost (level 1 of the hierarchy) read with
+to +-``CURVATURE_CLIP`` and the boundary term to +-``BOUNDARY_CLIP``.  M is the size-3 patch cost (level 1 of the hierarchy) read with
 linear interpolation in x and c.  After every step phi is median-filtered (``median_size``
 squared, symmetric borders; :mod:`lss_kernels.kernels.median`) and every ``reinit_every`` steps
-re-initialised to ``phi_scale`` times a signed distance (the re-initialisation comes first, as
+re-initialised to ``PHI_SCALE`` times a signed distance (the re-initialisation comes first, as
 in the authors' release).  The median's output goes through :class:`Settle`, which also counts
 the pixels whose sign flipped and writes D (Eq. 3, with the sharp Heaviside), so neither needs a
 pass of its own.
@@ -41,6 +41,7 @@ from ..kernels import lanes
 from ..kernels.distance import INF, DistanceTransform
 from ..kernels.filters import GaussianFilters
 from ..kernels.median import MedianFilter
+from ..params import BOUNDARY_CLIP, CURVATURE_CLIP, CURVATURE_SIGMA, PHI_SCALE
 from .matching import cost_at
 
 __all__ = ["CARRY", "LevelSet", "Settle", "disparity"]
@@ -109,9 +110,9 @@ class LevelSet:
         # the Eq. 2 step
         plane = lambda: lanes.lane_plane(pool, H, W, self.lanes, bucket=True)
         self.phi_x, self.kappa, self.normal_x, self.normal_y = (plane() for _ in range(4))
-        self.filters = GaussianFilters(pool, self.H, self.W, params.curvature_sigma)
+        self.filters = GaussianFilters(pool, self.H, self.W, CURVATURE_SIGMA)
         # the narrow band (0: none) and the blocks of lanes that its step reads (_mark_band)
-        self.band = float(params.narrow_band * params.phi_scale)
+        self.band = float(params.narrow_band * PHI_SCALE)
         self.reach = lanes.block_count(self.filters.half, self.lanes)
         block = lambda: pool.field(ti.i8, (H, lanes.block_count(W, self.lanes)), bucket=True)
         self.in_band, self.near_rows, self.near = block(), block(), block()
@@ -122,9 +123,9 @@ class LevelSet:
         self.reference_sign = pool.field(ti.i8, (H, W), bucket=True)
         self.area = pool.field(ti.i32, (), bucket=True)
         pool.host(self.d_limit, self.phi, self.phi_next, self.D)   # start(), outputs
-        self.curvature_clip = float(params.curvature_clip)
-        self.boundary_clip = float(params.boundary_clip)
-        self.scale = float(params.phi_scale)
+        self.curvature_clip = float(CURVATURE_CLIP)
+        self.boundary_clip = float(BOUNDARY_CLIP)
+        self.scale = float(PHI_SCALE)
         # squared distances of the re-initialisation (also B_mono's scratch, see costs)
         self.distance_map = pool.field(ti.f32, (H, W, 1), bucket=True)
         self.distance = None
@@ -391,7 +392,7 @@ class LevelSet:
             self.distance_map[y, x, 0] = 0.0 if inside == (features == 1) else INF
 
     def reinitialise(self, phi):
-        """phi <- phi_scale x signed distance of the region phi > 0, in place (the signs, and
+        """phi <- PHI_SCALE x signed distance of the region phi > 0, in place (the signs, and
         so the region, are kept)."""
         self._distance_step(phi, -1, 0, self.scale)     # distance to the background
         self.distance.run(self.distance_map, (self.H, self.W))
@@ -442,7 +443,7 @@ class LevelSet:
         return self.settle(shapes)
 
     def start(self, mask, c_max):
-        """phi = phi_scale x signed distance of a boolean ``(H, W)`` mask; D will be clamped
+        """phi = PHI_SCALE x signed distance of a boolean ``(H, W)`` mask; D will be clamped
         to [0, ``c_max``]."""
         pool = self.extent.pool
         pool.write(self.d_limit, np.array(float(c_max)))

@@ -30,6 +30,7 @@ rows, then columns: a few operations per pixel whatever the window.
 """
 import taichi as ti
 
+from ..params import REFINE_RATIO, REFINE_SUPPORT
 from .matching import MatchingCost
 
 __all__ = ["LayerRefinement", "NO_COST"]
@@ -53,10 +54,12 @@ class LayerRefinement:
         Candidate half-range around the surface (left-view pixels), the half-side of the
         layer-restricted matching window and of the residual's box, per pass.
     ratio : float
-        Peak-ratio threshold of a distinct match (in (0, 1]).
+        Peak-ratio threshold of a distinct match (in (0, 1]; :data:`~lss_kernels.params.
+        REFINE_RATIO`).
     support : float
         Fraction of a box's layer pixels that must hold a distinct match for the box's
-        average residual to count fully (in [0, 1]; 0: any match counts fully).
+        average residual to count fully (in [0, 1]; 0: any match counts fully;
+        :data:`~lss_kernels.params.REFINE_SUPPORT`).
 
     After :meth:`run`, ``surface`` holds the refined map and ``weight`` 1 on the pixels
     whose last pass kept a distinct match of their own (the others took their layer's
@@ -69,7 +72,8 @@ class LayerRefinement:
     :class:`~lss_kernels.kernels.backend.Extent`: they compile once per bucket.
     """
 
-    def __init__(self, pool, height, width, passes, ratio, support):
+    def __init__(self, pool, height, width, passes, ratio=REFINE_RATIO,
+                 support=REFINE_SUPPORT):
         self.H, self.W = int(height), int(width)
         self.extent = pool.extent(self.H, self.W)
         self.passes = tuple(tuple(int(v) for v in p) for p in passes)

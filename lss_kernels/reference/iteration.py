@@ -27,7 +27,7 @@ The stages and their order are those of the solver (``solver.STAGES``):
     delta_theta by the ray cast of Sec. 2 (fixed-point iteration on
     ``t = Theta_1(x) - Theta_2(x - s t)``, ``s = sign(dphi/dx)``), and phi(x + delta_theta).
 ``boundary``
-    B(x, y, Theta_1(x, y)) = alpha_occ B_occ + alpha_mono B_mono + alpha_const (linear in c)
+    B(x, y, Theta_1(x, y)) = alpha_1 B_occ + alpha_2 B_mono + alpha_3 (linear in c)
     and its Gaussian-derivative gradient.
 ``levelset``
     The Eq. 2 step, then (every ``reinit_every`` iterations) the signed-distance
@@ -56,6 +56,7 @@ import numpy as np
 from ..model import FIXED_POINT_STEPS, STAGES
 from . import kernels as ref
 from ..model.sweep import due
+from ..params import BOUNDARY_CLIP, CURVATURE_CLIP, CURVATURE_SIGMA, PHI_SCALE
 from .sweep import background_sweep
 
 __all__ = ["IterationState", "STAGES", "iteration", "run", "state_from_solver"]
@@ -152,8 +153,8 @@ def iteration(state: IterationState, params):
     # upward: derivatives of phi, phi(x + delta_theta), patch means / extremes
     t = time.perf_counter()
     phi = state.phi
-    derivatives = ref.gaussian_derivatives(phi, p.curvature_sigma)
-    kappa, nx, ny = ref.curvature(derivatives, p.curvature_clip)
+    derivatives = ref.gaussian_derivatives(phi, CURVATURE_SIGMA)
+    kappa, nx, ny = ref.curvature(derivatives, CURVATURE_CLIP)
     phi_plus = ref.interp_row(phi, x + state.delta_theta)
     if not first:
         d_mean = [ref.box_mean(state.D, s) for s in sizes]
@@ -215,17 +216,17 @@ def iteration(state: IterationState, params):
 
     # boundary: B(x, y, Theta_1) and its gradient
     b = ref.boundary_weight(state.b_occ, state.edge_left, state.edge_right, th1,
-                            (p.alpha_occ, p.alpha_mono, p.alpha_const))
-    b_x, b_y = ref.gaussian_derivatives(b, p.curvature_sigma)[:2]
+                            p.alpha)
+    b_x, b_y = ref.gaussian_derivatives(b, CURVATURE_SIGMA)[:2]
     now = time.perf_counter()
     seconds["boundary"], t = now - t, now
 
     # levelset: Eq. 2, re-initialisation, median, Eq. 3
     phi_next = ref.levelset_step(phi, state.costs[0], th1, th2, delta_theta, b, b_x, b_y,
-                                 kappa, nx, ny, p.dt, p.mu, p.boundary_clip,
-                                 p.narrow_band * p.phi_scale)
+                                 kappa, nx, ny, p.dt, p.mu, BOUNDARY_CLIP,
+                                 p.narrow_band * PHI_SCALE)
     if it % p.reinit_every == 0:
-        phi_next = ref.reinitialise(phi_next, p.phi_scale)
+        phi_next = ref.reinitialise(phi_next, PHI_SCALE)
     phi_new = ref.median_filter(phi_next, p.median_size)
     flipped = int(((phi_new > 0) != (phi > 0)).sum())
     area = int((phi_new > 0).sum())
