@@ -8,7 +8,8 @@ One iteration (as in the authors' release, with everything a data-parallel kerne
 3. patch messages d_p, sigma_p (Eq. 5; no |c - D| prior and all patches valid at iteration 1);
 4. downward pass: the consensus (Eq. 7);
 5. Theta_1 over phi >= 0 and Theta_2 over the visible background, by the hierarchical
-   normal-equation reduction (Eq. 8), then the background's plane sweep (model/sweep.py);
+   normal-equation reduction (Eq. 8), then the background's plane sweep (model/sweep.py):
+   ``GlobalShapes.update``;
 6. delta_theta for the new Theta (the ray cast of Sec. 2);
 7. the Eq. 2 step of phi, then (every ``reinit_every``) signed-distance re-initialisation and
    the median filter;
@@ -44,7 +45,7 @@ from .model.refine import LayerRefinement
 from .params import c_max
 from .confidence import of_solver
 from .result import Result
-from .model.shapes import GlobalShapes
+from .model.shapes import GlobalShapes, RegionWeights
 from .model.sweep import BackgroundSweep
 from .model.start import initial_region
 from .start_types import UnreliableStartWarning
@@ -58,7 +59,7 @@ BRIDGE_GAP = 16
 
 #: What a solver holds per disparity grid (:meth:`Solver._use`).
 _GRID = ("c_max", "pool", "extent", "left", "right", "matching", "hierarchy", "messages",
-         "costs", "shapes", "sweep", "initialiser", "occ", "levelset", "refinement", "front",
+         "costs", "shapes", "initialiser", "occ", "levelset", "refinement", "front",
          "fused")
 
 
@@ -144,8 +145,6 @@ class Solver:
         self.messages = Messages(self.hierarchy, self.params.subpixel_messages, pool,
                                  self.params.message_ambiguity)
         self.costs = BoundaryCosts(pool, H, W, C)
-        self.shapes = GlobalShapes(pool, H, W)
-        self.sweep = BackgroundSweep(pool, H, W, C)
         self.initialiser = InitialRegion(pool, H, W)
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, self.params)
@@ -154,10 +153,14 @@ class Solver:
         if self.front is not None:
             self.levelset.hidden = self.front.hidden
             self.initialiser.bridge_gap = BRIDGE_GAP
+        h = self.hierarchy
+        weights = RegionWeights(self.extent, h.precision, h.consensus_mean, self.levelset.phi,
+                                self.occ.phi_plus,
+                                None if self.front is None else self.front.hidden)
+        self.shapes = GlobalShapes(pool, H, W, weights, BackgroundSweep(pool, H, W, C))
         self.refinement = (LayerRefinement(pool.annex(), H, W, p.refine_passes, p.refine_ratio,
                                            p.refine_support) if p.refine else None)
         # what the host reads and writes of the pool (FieldPool.host)
-        h = self.hierarchy
         pool.host(self.left, self.right, h.consensus_mean, h.precision,
                   self.occ.disparity_left, self.occ.occlusion_left, self.occ.foreground_left)
         if self.refinement is not None:
@@ -210,7 +213,7 @@ class Solver:
         if self.front is not None:
             self.front.capture(self.hierarchy.matching_cost, self.c_max)
         self.costs.build(self.hierarchy.matching_cost, self.left, self.right, self.params)
-        self.sweep.standardise(self.hierarchy.matching_cost)
+        self.shapes.sweep.standardise(self.hierarchy.matching_cost)
         ti.sync()
         self.timings = {"setup_costs": time.perf_counter() - t0}
         self.timings.update({s: 0.0 for s in STAGES})
@@ -265,37 +268,6 @@ class Solver:
         """The consensus (Eq. 7) of messages with no prior (Eq. 5), every patch valid."""
         self.fused.consensus(self.messages.prepare(0.0, False, False), 0)
 
-    # ------------------------------------------------------------------ small kernels
-    @ti.func
-    def region_weights(self, y, x):
-        """The rows of Eq. 8 at pixel (y, x), ``[w_fg, w_bg]``: the consensus precision
-        (1 / sigma^2, to the power ``shape_weight_power``) on the foreground (phi >= 0) and
-        on the visible background (phi < 0 and phi(x + delta_theta) < 0), 0 elsewhere, and 0
-        on the pixels that the third layer hides.  Summed by ``GlobalShapes.fit`` as it reads
-        the pixels."""
-        p = self.hierarchy.precision[y, x]
-        w = p
-        if ti.static(self.params.shape_weight_power != 1):
-            w = p * p
-        phi = self.levelset.phi[y, x]
-        # a consensus whose correspondence falls outside the other image (x - c < 0 or
-        # x + c > W - 1) is no evidence: its costs compare clamped border columns
-        c = self.hierarchy.consensus_mean[y, x]
-        xf = ti.cast(x, ti.f32)
-        if xf - c < 0.0 or xf + c > self.extent.width() - 1.0:
-            w = 0.0
-        w_fg = 0.0
-        w_bg = 0.0
-        if phi >= 0:
-            w_fg = w
-        elif self.occ.phi_plus[y, x] < 0:
-            w_bg = w
-        if ti.static(self.params.front_margin > 0):
-            if self.front.hidden[y, x] == 1:     # no evidence for either layer
-                w_fg = 0.0
-                w_bg = 0.0
-        return ti.Vector([w_fg, w_bg])
-
     # ------------------------------------------------------------------ the iteration
     def _stage(self, name, t):
         if self.profile:
@@ -333,9 +305,7 @@ class Solver:
         else:
             self.fused.consensus(self.messages.prepare(p.beta / self.c_max, not first,
                                                        not first), int(not first))
-        self.shapes.fit(self, hier.consensus_mean)
-        plane = self.sweep.run(self.iteration, p, hier.matching_cost, self.shapes, ls.phi,
-                               self.occ.phi_plus, hier.consensus_mean)
+        plane = self.shapes.update(self.iteration, p, hier.matching_cost)
         if self.front is not None:
             self.front.update(hier.matching_cost, self.c_max, self.shapes, ls.phi,
                               -FRONT_REACH * p.phi_scale, 0.5 * p.front_margin)
