@@ -18,6 +18,8 @@ fit, then the background's plane sweep (:mod:`lss_kernels.model.sweep`).
 import numpy as np
 import taichi as ti
 
+from ..kernels.curves import quadratic
+
 __all__ = ["GlobalShapes", "RegionWeights", "WEIGHT_POWER", "WeightPlanes",
            "to_pixel_coefficients"]
 
@@ -126,17 +128,18 @@ class GlobalShapes:
         it."""
         xn = (x - self.cx) * self.inv_s
         yn = (y - self.cy) * self.inv_s
-        t0, t1, t2 = self.theta[j, 0], self.theta[j, 1], self.theta[j, 2]
-        t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
-        return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
+        return quadratic(self._coefficients(j), xn, yn)
 
     @ti.func
     def value(self, j, x, y):
         """Theta_j at real cyclopean pixel coordinates (x, y)."""
         xn, yn = self.normalised(x, y)
-        t0, t1, t2 = self.theta[j, 0], self.theta[j, 1], self.theta[j, 2]
-        t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
-        return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
+        return quadratic(self._coefficients(j), xn, yn)
+
+    @ti.func
+    def _coefficients(self, j):
+        """theta_j as a 6-vector."""
+        return ti.Vector([self.theta[j, a] for a in ti.static(range(NB))])
 
     @ti.kernel
     def moved(self, phi: ti.template()) -> ti.f32:
@@ -152,8 +155,7 @@ class GlobalShapes:
                 xn, yn = self.normalised(ti.cast(x, ti.f32), ti.cast(y, ti.f32))
                 d = ti.Vector([self.theta[j, a] - self.reference[j, a]
                                for a in ti.static(range(NB))])
-                dz = d[0] * xn * xn + d[1] * xn * yn + d[2] * yn * yn + d[3] * xn + d[4] * yn + d[5]
-                ti.atomic_max(self.change[None], ti.abs(dz))
+                ti.atomic_max(self.change[None], ti.abs(quadratic(d, xn, yn)))
         for j, a in self.theta:
             self.reference[j, a] = self.theta[j, a]
         return self.change[None]
