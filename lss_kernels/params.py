@@ -107,9 +107,6 @@ class Params:
     mono_threshold : float
         Threshold on the Sobel magnitude that marks image edges for B_mono (one value for
         every scene).
-    shape_weight_power : int
-        Rows of the least-squares fit of Theta are weighted by (1 / sigma^2) ** power:
-        1 is Eq. 8 of the paper, 2 is what the release does.
     matching_cost : {"ad", "ad_census"}
         The pixel matching cost M (:mod:`lss_kernels.model.matching`): "ad", the paper's
         absolute colour difference, or "ad_census", AD-Census (census of 7x7 grey windows
@@ -190,7 +187,6 @@ class Params:
     stop_patience: int = 1
     narrow_band: float = 10.5
     mono_threshold: float = 0.08
-    shape_weight_power: int = 2
     matching_cost: str = "ad"
     subpixel_messages: bool = True
     refine: bool = True
@@ -245,7 +241,6 @@ class Params:
         need("stop_patience", posint, "an integer >= 1")
         need("narrow_band", nonneg, "a finite number of pixels >= 0 (0: no band)")
         need("mono_threshold", pos, "a finite number > 0")
-        need("shape_weight_power", lambda v: v in (1, 2), "1 (the paper) or 2 (the release)")
         need("matching_cost", lambda v: v in ("ad", "ad_census"), "'ad' or 'ad_census'")
         for name in ("subpixel_messages", "zero_floor", "refine_ellipse", "refine"):
             switch(name)
@@ -272,8 +267,8 @@ class Params:
         argmin of Eq. 5, Theta_2 by the Eq. 8 fit alone (no plane sweep), the start ellipse
         as drawn, the two quadratics as the output (no refinement, the z-buffer's strips),
         no photometric correction, no recovery solve, the release's grid from 2 px.  Theta's
-        rows are weighted as the release does (``shape_weight_power`` 2).  The stopping rule
-        stands for the paper's "upon convergence" (the release runs ``max_iterations``,
+        rows are weighted as the release does (``model.shapes.WEIGHT_POWER``).  The stopping
+        rule stands for the paper's "upon convergence" (the release runs ``max_iterations``,
         1500).  ``changes`` as for :meth:`replace`."""
         return cls().replace(**{
             "matching_cost": "ad", "narrow_band": 0.0, "subpixel_messages": False,

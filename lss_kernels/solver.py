@@ -8,7 +8,8 @@ One iteration (as in the authors' release, with everything a data-parallel kerne
 3. patch messages d_p, sigma_p (Eq. 5; no |c - D| prior and all patches valid at iteration 1);
 4. downward pass: the consensus (Eq. 7);
 5. Theta_1 over phi >= 0 and Theta_2 over the visible background, by the hierarchical
-   normal-equation reduction (Eq. 8), then the background's plane sweep (model/sweep.py);
+   normal-equation reduction (Eq. 8), then the background's plane sweep (model/sweep.py):
+   ``GlobalShapes.update``;
 6. delta_theta for the new Theta (the ray cast of Sec. 2);
 7. the Eq. 2 step of phi, then (every ``reinit_every``) signed-distance re-initialisation and
    the median filter;
@@ -27,42 +28,21 @@ import taichi as ti
 from .checks.pair import CheckedPair
 from .checks.validate import check_memory, check_params
 from .kernels import backend
-from .kernels.backend import FieldPool
 from .model import STAGES
-from .model.costs import BoundaryCosts
-from .model.front import REACH as FRONT_REACH, FrontLayer
-from .model.hierarchy import PatchHierarchy
-from .model.init import InitialRegion
-from .model.iteration import IterationKernels
+from .model.front import REACH as FRONT_REACH
+from .model.grid import Grid
 from .model.layers import FRONT, front_in_left_view, occlusion_by_layers
-from .model.levelset import LevelSet
-from .model.matching import MatchingCost
-from .model.messages import Messages
 from .model.offset import SHIFT, model_pair, search_range, to_user_left
-from .model.occlusion import OcclusionGeometry
-from .model.refine import LayerRefinement
 from .params import PHI_SCALE, c_max
 from .confidence import of_solver
 from .result import Result
-from .model.shapes import GlobalShapes
-from .model.sweep import BackgroundSweep
 from .model.start import initial_region
 from .start_types import UnreliableStartWarning
 from .stopping import StopRule
 
 __all__ = ["Result", "Solver"]
 
-#: Widest layer in front of the object that a point's start is carried across (a rod, a
-#: handle), cyclopean pixels (:meth:`lss_kernels.model.init.InitialRegion.bridge`).
-BRIDGE_GAP = 16
 
-#: What a solver holds per disparity grid (:meth:`Solver._use`).
-_GRID = ("c_max", "pool", "extent", "left", "right", "matching", "hierarchy", "messages",
-         "costs", "shapes", "sweep", "initialiser", "occ", "levelset", "refinement", "front",
-         "fused")
-
-
-@ti.data_oriented
 class Solver:
     """A two-layer level-set stereo solve that can be stepped one iteration at a time.
 
@@ -109,67 +89,30 @@ class Solver:
         pair = CheckedPair.of(left, right, d_max, init, init_frame, self.params)
         self.H, self.W = pair.left.shape[:2]
         self.profile = profile
-        self.pool, self._grids = None, {}
+        self.grid, self._grids = None, {}   # the current grid; every grid, by c_max
         self.c_release = c_max(pair.d_max)  # the authors' grid; a pair from 0 px: one more
         self._use(self.c_release)
         self._load(pair, t_start)
 
     def _use(self, C):
-        """Make the fields and kernels of ``C`` cyclopean candidates the solve's, zeroed: built
-        the first time, kept when another grid is taken up (a solver holds the authors' grid
-        and, once a pair was searched from 0 px, the grid of one plane more)."""
-        if self.pool is not None and self.c_max != C:
-            self._grids[self.c_max] = {name: getattr(self, name) for name in _GRID}
-        if self.pool is not None and self.c_max == C:
-            self.pool.zero()
-        elif C in self._grids:
-            for name, value in self._grids.pop(C).items():
-                setattr(self, name, value)
-            self.pool.zero()
+        """Make the grid of ``C`` cyclopean candidates the solve's, zeroed: built the first
+        time, kept when another grid is taken up (a solver holds the authors' grid and, once
+        a pair was searched from 0 px, the grid of one plane more)."""
+        grid = self._grids.get(C)
+        if grid is None:
+            check_memory(self.H, self.W, 2 * C)    # before a new pool's allocation
+            grid = self._grids[C] = Grid(self.H, self.W, C, self.params)
         else:
-            self._build(C)
+            grid.pool.zero()
+        self.grid = grid
 
-    def _build(self, C):
-        """The fields and kernels of a solve with ``C`` cyclopean candidates, in a new pool."""
-        H, W = self.H, self.W
-        check_memory(H, W, 2 * C)       # before the first field: a new pool's allocation
-        self.c_max = C
-        # fields of the size bucket's shape, H and W read at run time: compiled once per bucket
-        self.pool = pool = FieldPool()
-        self.extent = pool.extent(H, W)
-        self.left = pool.vector(3, ti.f32, self.extent.bucket, bucket=True)
-        self.right = pool.vector(3, ti.f32, self.extent.bucket, bucket=True)
-        self.matching = MatchingCost(pool, H, W, self.params.matching_cost)
-        self.hierarchy = PatchHierarchy(pool, H, W, C, self.params.patch_sizes)
-        self.messages = Messages(self.hierarchy, self.params.subpixel_messages, pool,
-                                 self.params.message_ambiguity)
-        self.costs = BoundaryCosts(pool, H, W, C)
-        self.shapes = GlobalShapes(pool, H, W)
-        self.sweep = BackgroundSweep(pool, H, W, C)
-        self.initialiser = InitialRegion(pool, H, W)
-        self.occ = OcclusionGeometry(pool, H, W, C)
-        self.levelset = LevelSet(pool, H, W, self.params)
-        p = self.params
-        self.front = FrontLayer(pool, H, W) if p.front_margin > 0 else None
-        if self.front is not None:
-            self.levelset.hidden = self.front.hidden
-            self.initialiser.bridge_gap = BRIDGE_GAP
-        self.refinement = (LayerRefinement(pool.annex(), H, W, p.refine_passes)
-                           if p.refine else None)
-        # what the host reads and writes of the pool (FieldPool.host)
-        h = self.hierarchy
-        pool.host(self.left, self.right, h.consensus_mean, h.precision,
-                  self.occ.disparity_left, self.occ.occlusion_left, self.occ.foreground_left)
-        if self.refinement is not None:
-            r = self.refinement
-            pool.host(r.surface, r.match, r.peak_ratio, r.weight)
-        if self.front is not None:
-            pool.host(self.front.front, self.front.first)
-        self.fused = IterationKernels(self.levelset, self.occ, self.hierarchy, self.messages,
-                                      self.shapes, self.costs)
-        pool.finalize()
-        self.levelset.setup()
-        self.costs.setup(self.levelset.distance, self.levelset.distance_map)
+    def __getattr__(self, name):
+        """The current grid's fields and stage objects are the solver's: ``solver.hierarchy``
+        is ``solver.grid.hierarchy`` (:class:`~lss_kernels.model.grid.Grid`)."""
+        grid = self.__dict__.get("grid")
+        if grid is None:
+            raise AttributeError(f"Solver has no attribute {name!r} (or it is closed)")
+        return getattr(grid, name)
 
     def reset(self, left, right, d_max, init, init_frame="left"):
         """Start over on another pair of the same size and the same ``c_max``, in this
@@ -179,7 +122,7 @@ class Solver:
         Arguments as for :class:`Solver`; the state is exactly that of a new solver.
         """
         t_start = time.perf_counter()
-        if self.pool is None:
+        if self.grid is None:
             raise RuntimeError("reset: the solver is closed; build a new Solver")
         pair = CheckedPair.of(left, right, d_max, init, init_frame, self.params)
         left, d_max = pair.left, pair.d_max
@@ -210,7 +153,7 @@ class Solver:
         if self.front is not None:
             self.front.capture(self.hierarchy.matching_cost, self.c_max)
         self.costs.build(self.hierarchy.matching_cost, self.left, self.right, self.params)
-        self.sweep.standardise(self.hierarchy.matching_cost)
+        self.shapes.sweep.standardise(self.hierarchy.matching_cost)
         ti.sync()
         self.timings = {"setup_costs": time.perf_counter() - t0}
         self.timings.update({s: 0.0 for s in STAGES})
@@ -265,37 +208,6 @@ class Solver:
         """The consensus (Eq. 7) of messages with no prior (Eq. 5), every patch valid."""
         self.fused.consensus(self.messages.prepare(0.0, False, False), 0)
 
-    # ------------------------------------------------------------------ small kernels
-    @ti.func
-    def region_weights(self, y, x):
-        """The rows of Eq. 8 at pixel (y, x), ``[w_fg, w_bg]``: the consensus precision
-        (1 / sigma^2, to the power ``shape_weight_power``) on the foreground (phi >= 0) and
-        on the visible background (phi < 0 and phi(x + delta_theta) < 0), 0 elsewhere, and 0
-        on the pixels that the third layer hides.  Summed by ``GlobalShapes.fit`` as it reads
-        the pixels."""
-        p = self.hierarchy.precision[y, x]
-        w = p
-        if ti.static(self.params.shape_weight_power != 1):
-            w = p * p
-        phi = self.levelset.phi[y, x]
-        # a consensus whose correspondence falls outside the other image (x - c < 0 or
-        # x + c > W - 1) is no evidence: its costs compare clamped border columns
-        c = self.hierarchy.consensus_mean[y, x]
-        xf = ti.cast(x, ti.f32)
-        if xf - c < 0.0 or xf + c > self.extent.width() - 1.0:
-            w = 0.0
-        w_fg = 0.0
-        w_bg = 0.0
-        if phi >= 0:
-            w_fg = w
-        elif self.occ.phi_plus[y, x] < 0:
-            w_bg = w
-        if ti.static(self.params.front_margin > 0):
-            if self.front.hidden[y, x] == 1:     # no evidence for either layer
-                w_fg = 0.0
-                w_bg = 0.0
-        return ti.Vector([w_fg, w_bg])
-
     # ------------------------------------------------------------------ the iteration
     def _stage(self, name, t):
         if self.profile:
@@ -333,9 +245,7 @@ class Solver:
         else:
             self.fused.consensus(self.messages.prepare(p.beta / self.c_max, not first,
                                                        not first), int(not first))
-        self.shapes.fit(self, hier.consensus_mean)
-        plane = self.sweep.run(self.iteration, p, hier.matching_cost, self.shapes, ls.phi,
-                               self.occ.phi_plus, hier.consensus_mean)
+        plane = self.shapes.update(self.iteration, p, hier.matching_cost)
         if self.front is not None:
             self.front.update(hier.matching_cost, self.c_max, self.shapes, ls.phi,
                               -FRONT_REACH * PHI_SCALE, 0.5 * p.front_margin)
@@ -504,21 +414,13 @@ class Solver:
                       search=dict(self.search), layers=layers,
                       confidence=of_solver(self, disparity, foreground, occlusion))
 
-    def _all_grids(self):
-        """Every grid the solver holds (``_GRID`` names to objects), the current one first."""
-        current = [{name: getattr(self, name) for name in _GRID}] if self.pool is not None else []
-        return current + list(self._grids.values())
-
     def close(self):
         """Free the solver's device memory (the object cannot be used afterwards)."""
-        for grid in self._all_grids():
-            grid["levelset"].destroy()
-            grid["costs"].destroy()
-            grid["pool"].destroy()
-        self.pool, self._grids = None, {}
+        for grid in self._grids.values():
+            grid.destroy()
+        self.grid, self._grids = None, {}
 
     @property
     def memory_bytes(self):
         """Bytes held by the solver's fields, distance-transform scratch included."""
-        return sum(g["pool"].nbytes + g["levelset"].scratch_bytes + g["costs"].scratch_bytes
-                   for g in self._all_grids())
+        return sum(grid.nbytes for grid in self._grids.values())

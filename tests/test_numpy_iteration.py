@@ -132,14 +132,12 @@ def test_one_iteration_at_a_width_of_partial_lane_blocks(fresh_taichi):
 
 
 @pytest.mark.parametrize("switch", [{"subpixel_messages": False}, {"narrow_band": 0.0},
-                                    {"message_ambiguity": 0.9}, {"shape_weight_power": 1}],
-                         ids=["integer_argmin", "no_narrow_band", "message_ambiguity",
-                              "precision_weights"])
+                                    {"message_ambiguity": 0.9}],
+                         ids=["integer_argmin", "no_narrow_band", "message_ambiguity"])
 def test_the_papers_switches_match_the_specification(fresh_taichi, switch):
     """The iteration with the switches that ``Params.paper()`` turns to the paper's method
     (Eq. 5's integer argmin; Eq. 2's step everywhere, no narrow band) and with the messages
-    weighted by their distinctness (a periodic pair's), and Eq. 8's rows weighted by the
-    precision rather than its square: three iterations, each against
+    weighted by their distinctness (a periodic pair's): three iterations, each against
     numpy's from the kernels' own state before it."""
     from lss_kernels.solver import Solver
     params = PARAMS.replace(**switch)

@@ -5,6 +5,7 @@ import taichi as ti
 
 from lss_kernels import Params, Solver, solve
 from lss_kernels.metrics import score
+from lss_kernels.model.shapes import WEIGHT_POWER
 from lss_kernels.params import OCC_SIGMA, OCC_THRESHOLD
 from lss_kernels.scenes import make_scene
 
@@ -195,17 +196,17 @@ def test_shape_weights_drop_consensus_that_points_outside_the_other_image(ti_arc
     prec = rng.uniform(0.5, 2.0, (H, W)).astype(np.float32)
     solver.hierarchy.consensus_mean.from_numpy(solver.extent.padded(mean))
     solver.hierarchy.precision.from_numpy(solver.extent.padded(prec))
-    assert solver.params.shape_weight_power == 2
+    assert WEIGHT_POWER == 2
     weight_fg, weight_bg = ti.field(ti.f32, (H, W)), ti.field(ti.f32, (H, W))
 
     @ti.kernel
-    def evaluate(s: ti.template()):
+    def evaluate(weights: ti.template()):
         for y, x in weight_fg:
-            w = s.region_weights(y, x)
+            w = weights.row_weights(y, x)
             weight_fg[y, x] = w[0]
             weight_bg[y, x] = w[1]
 
-    evaluate(solver)
+    evaluate(solver.shapes.weights)
     x = np.arange(W)[None, :]
     inside = (x - mean >= 0) & (x + mean <= W - 1)
     assert 0.05 < (~inside).mean() < 0.95

@@ -7,5 +7,6 @@
 ``filters``        separable Gaussian-derivative filters with symmetric borders
 ``median``         the median filter by shared-column selection networks
 ``distance``       exact Euclidean distance transforms
+``curves``         a parabola's vertex, a curve's two minima, a quadratic in two variables
 =================  =========================================================================
 """

@@ -14,6 +14,7 @@
                    left-view rendering (Sec. 2)
 ``levelset``       phi, its descent step (Eq. 2), re-initialisation and D (Eq. 3)
 ``iteration``      the stages of an iteration that run back to back, one kernel each
+``grid``           one disparity grid: a pool of fields and the stage objects above
 =================  =========================================================================
 
 Nothing here imports :mod:`lss_kernels.apps`; the building blocks come from

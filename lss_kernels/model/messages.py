@@ -28,6 +28,8 @@ Frame: cyclopean; disparities ``c = 1 .. c_max`` (volume index ``k = c - 1``).
 import numpy as np
 import taichi as ti
 
+from ..kernels.curves import curve_minima, parabola_vertex
+
 __all__ = ["Messages"]
 
 
@@ -84,9 +86,8 @@ class Messages:
                 cm = cost[y, x, arg - 2]
                 c0 = cost[y, x, arg - 1]
                 cp = cost[y, x, arg]
-                den = cm - 2.0 * c0 + cp
-                if c0 <= cm and c0 <= cp and den > 1e-12:
-                    r += ti.min(ti.max(0.5 * (cm - cp) / den, -0.5), 0.5)
+                if c0 <= cm and c0 <= cp:
+                    r += ti.min(ti.max(parabola_vertex(cm, c0, cp, 1e-12), -0.5), 0.5)
         return r
 
     @ti.func
@@ -243,16 +244,7 @@ class Messages:
                     x = blk * self.lanes + lane
                     q = 0.0
                     if x < width:
-                        best, kb, total = 1e30, 0, 0.0
-                        for k in range(self.C):
-                            c = cost[y, x, k]
-                            total += c
-                            if c < best:
-                                best, kb = c, k
-                        second = 1e30
-                        for k in range(self.C):
-                            if ti.abs(k - kb) >= 2:
-                                second = ti.min(second, cost[y, x, k])
+                        best, _, second, total = curve_minima(cost, y, x, self.C, 1e30)
                         mean = total / self.C
                         r = 1.0
                         if mean > best:

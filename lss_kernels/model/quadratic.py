@@ -1,7 +1,7 @@
 """The paper's quadratic surfaces on the host (numpy): Theta . U(x, y) with the basis
 U = {x^2, xy, y^2, x, y, 1} of Eq. 8, in whatever coordinates the coefficients are given
 (normalised, cyclopean or left-view pixels).  The kernels' own evaluation is
-:meth:`lss_kernels.model.shapes.GlobalShapes.value`."""
+:func:`lss_kernels.kernels.curves.quadratic`."""
 import numpy as np
 
 __all__ = ["basis", "evaluate"]

@@ -30,6 +30,7 @@ rows, then columns: a few operations per pixel whatever the window.
 """
 import taichi as ti
 
+from ..kernels.curves import curve_minima, parabola_vertex
 from ..params import REFINE_RATIO, REFINE_SUPPORT
 from .matching import MatchingCost
 
@@ -228,27 +229,14 @@ class LayerRefinement:
         """Per pixel: the distinct, interior best candidate (peak ratio), refined to the
         parabola's vertex; its residual against the surface and its weight (1 or 0)."""
         for y, x in ti.ndrange(*self._pixels()):
-            best = NO_COST
-            kb = -1
-            for k in range(2 * R + 1):
-                c = self.costs[y, x, k]
-                if c < best:
-                    best = c
-                    kb = k
-            second = NO_COST
-            for k in range(2 * R + 1):
-                if ti.abs(k - kb) >= 2:
-                    second = ti.min(second, self.costs[y, x, k])
+            best, kb, second, _ = curve_minima(self.costs, y, x, 2 * R + 1, NO_COST)
             w = 0.0
             r = 0.0
             if 0 < kb < 2 * R and self.visible[y, x] == 1:
                 cm = self.costs[y, x, kb - 1]
                 cp = self.costs[y, x, kb + 1]
                 if cm < NO_COST and cp < NO_COST and best < ratio * second:
-                    den = cm - 2.0 * best + cp
-                    sub = 0.0
-                    if den > 0:
-                        sub = 0.5 * (cm - cp) / den
+                    sub = parabola_vertex(cm, best, cp, 0.0)
                     r = ti.cast(self.base[y, x] + kb - R, ti.f32) + sub - self.surface[y, x]
                     w = 1.0
             self.residual[y, x] = r

@@ -9,11 +9,23 @@ equations: every pixel contributes ``w U U^T`` and ``w U d-bar`` to its region's
 tile sums its children's 21 + 6 terms in a fixed order (so the result does not depend on the
 number of threads), and the root solves the two 6x6 systems.  A region with fewer than 6
 weighted rows, or a singular system, keeps its previous shape.
+
+The rows are weighted as the authors' release weights them, by the consensus precision
+(1 / sigma^2 of Eq. 7) to the power ``WEIGHT_POWER`` (Eq. 8 writes the power 1)
+(:class:`RegionWeights`).  :meth:`GlobalShapes.update` is the iteration's Theta update: the
+fit, then the background's plane sweep (:mod:`lss_kernels.model.sweep`).
 """
 import numpy as np
 import taichi as ti
 
-__all__ = ["GlobalShapes", "WeightPlanes", "to_pixel_coefficients"]
+from ..kernels.curves import quadratic
+
+__all__ = ["GlobalShapes", "RegionWeights", "WEIGHT_POWER", "WeightPlanes",
+           "to_pixel_coefficients"]
+
+#: Rows of Eq. 8 are weighted by the consensus precision (1 / sigma^2) to this power: 2, as
+#: the authors' release does (the paper writes 1).
+WEIGHT_POWER = 2
 
 NB = 6            # basis size
 NT = 21 + 6 + 1   # upper triangle of U U^T, U d, row count
@@ -52,10 +64,21 @@ class GlobalShapes:
     :class:`~lss_kernels.kernels.backend.Extent` and :attr:`frame`), so they compile once
     per size bucket.  The reduction has the levels of the bucket's tiles; those that the
     image leaves out stay zero.
+
+    Parameters
+    ----------
+    pool : FieldPool
+    height, width : int
+    weights : RegionWeights, optional
+        The rows of :meth:`update`'s fit (Eq. 8) and the planes it reads (for :meth:`update`).
+    sweep : BackgroundSweep, optional
+        The background's plane sweep that :meth:`update` runs after the fit (for
+        :meth:`update`).
     """
 
-    def __init__(self, pool, height, width):
+    def __init__(self, pool, height, width, weights=None, sweep=None):
         self.H, self.W = int(height), int(width)
+        self.weights, self.sweep = weights, sweep
         self.extent = pool.extent(self.H, self.W)
         self.cx, self.cy = (self.W - 1) / 2.0, (self.H - 1) / 2.0
         self.inv_s = 1.0 / (max(self.H, self.W) / 2.0)
@@ -105,17 +128,18 @@ class GlobalShapes:
         it."""
         xn = (x - self.cx) * self.inv_s
         yn = (y - self.cy) * self.inv_s
-        t0, t1, t2 = self.theta[j, 0], self.theta[j, 1], self.theta[j, 2]
-        t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
-        return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
+        return quadratic(self._coefficients(j), xn, yn)
 
     @ti.func
     def value(self, j, x, y):
         """Theta_j at real cyclopean pixel coordinates (x, y)."""
         xn, yn = self.normalised(x, y)
-        t0, t1, t2 = self.theta[j, 0], self.theta[j, 1], self.theta[j, 2]
-        t3, t4, t5 = self.theta[j, 3], self.theta[j, 4], self.theta[j, 5]
-        return t0 * xn * xn + t1 * xn * yn + t2 * yn * yn + t3 * xn + t4 * yn + t5
+        return quadratic(self._coefficients(j), xn, yn)
+
+    @ti.func
+    def _coefficients(self, j):
+        """theta_j as a 6-vector."""
+        return ti.Vector([self.theta[j, a] for a in ti.static(range(NB))])
 
     @ti.kernel
     def moved(self, phi: ti.template()) -> ti.f32:
@@ -131,8 +155,7 @@ class GlobalShapes:
                 xn, yn = self.normalised(ti.cast(x, ti.f32), ti.cast(y, ti.f32))
                 d = ti.Vector([self.theta[j, a] - self.reference[j, a]
                                for a in ti.static(range(NB))])
-                dz = d[0] * xn * xn + d[1] * xn * yn + d[2] * yn * yn + d[3] * xn + d[4] * yn + d[5]
-                ti.atomic_max(self.change[None], ti.abs(dz))
+                ti.atomic_max(self.change[None], ti.abs(quadratic(d, xn, yn)))
         for j, a in self.theta:
             self.reference[j, a] = self.theta[j, a]
         return self.change[None]
@@ -157,7 +180,7 @@ class GlobalShapes:
                             if x < width:
                                 xn, _ = self.normalised(ti.cast(x, ti.f32), 0.0)
                                 d = target[y, x]
-                                w_j = weights.region_weights(y, x)
+                                w_j = weights.row_weights(y, x)
                                 for j in ti.static(range(2)):
                                     w = w_j[j]
                                     if w > 0:
@@ -256,9 +279,9 @@ class GlobalShapes:
     @ti.kernel
     def fit(self, weights: ti.template(), target: ti.template()):
         """Weighted least squares of ``target`` (``(H, W)``, the consensus mean) over each
-        region; updates ``theta``.  ``weights`` has a ``ti.func`` ``region_weights(y, x)``
+        region; updates ``theta``.  ``weights`` has a ``ti.func`` ``row_weights(y, x)``
         giving pixel (y, x)'s row weights ``[w_fg, w_bg]`` (0 outside a region), computed
-        as the pixels are summed (no weight planes): the solver's Eq. 8 weights, or
+        as the pixels are summed (no weight planes): :class:`RegionWeights` (Eq. 8's), or
         :class:`WeightPlanes`.  One launch: the reduction's levels run in order."""
         self.fit_func(weights, target)
 
@@ -269,6 +292,15 @@ class GlobalShapes:
         for i in ti.static(range(1, len(self.tiles))):
             self._from_tiles(self.tiles[i - 1], self.tiles[i], i)
         self._solve_root(self.tiles[-1])
+
+    def update(self, iteration, params, cost):
+        """The Theta update of iteration ``iteration`` (1-based): Eq. 8's fit of the consensus
+        mean with :attr:`weights`, then, when it is due, the background's plane sweep over
+        the matching cost ``cost`` (:meth:`~lss_kernels.model.sweep.BackgroundSweep.run`).
+        Returns the sweep's plane (cyclopean disparity), or None when Theta_2 is the fit's."""
+        w = self.weights
+        self.fit(w, w.consensus)
+        return self.sweep.run(iteration, params, cost, self, w.phi, w.phi_plus, w.consensus)
 
     def set(self, theta_fg, theta_bg):
         """Set both shapes from normalised-basis coefficients (cyclopean units)."""
@@ -281,6 +313,58 @@ class GlobalShapes:
 
 
 @ti.data_oriented
+class RegionWeights:
+    """The rows of Eq. 8 (the ``weights`` of :meth:`GlobalShapes.fit`), read from the planes
+    of one grid as the pixels are summed.
+
+    Parameters
+    ----------
+    extent : Extent
+        The image's size.
+    precision, consensus : field
+        The consensus precision 1 / sigma^2 and mean d-bar (Eq. 7).
+    phi, phi_plus : field
+        phi and phi(x + delta_theta).
+    hidden : field, optional
+        1 on the pixels that a layer in front of the object hides
+        (:class:`~lss_kernels.model.front.FrontLayer`).
+    """
+
+    def __init__(self, extent, precision, consensus, phi, phi_plus, hidden=None):
+        self.extent, self.precision, self.consensus = extent, precision, consensus
+        self.phi, self.phi_plus, self.hidden = phi, phi_plus, hidden
+        self.with_hidden = hidden is not None
+
+    @ti.func
+    def row_weights(self, y, x):
+        """``[w_fg, w_bg]`` at pixel (y, x): the precision to the power ``WEIGHT_POWER`` on
+        the foreground (phi >= 0) and on the visible background (phi < 0 and
+        phi(x + delta_theta) < 0), 0 elsewhere, and 0 on the pixels that ``hidden`` marks."""
+        p = self.precision[y, x]
+        w = p
+        for _ in ti.static(range(WEIGHT_POWER - 1)):
+            w *= p
+        phi = self.phi[y, x]
+        # a consensus whose correspondence falls outside the other image (x - c < 0 or
+        # x + c > W - 1) is no evidence: its costs compare clamped border columns
+        c = self.consensus[y, x]
+        xf = ti.cast(x, ti.f32)
+        if xf - c < 0.0 or xf + c > self.extent.width() - 1.0:
+            w = 0.0
+        w_fg = 0.0
+        w_bg = 0.0
+        if phi >= 0:
+            w_fg = w
+        elif self.phi_plus[y, x] < 0:
+            w_bg = w
+        if ti.static(self.with_hidden):
+            if self.hidden[y, x] == 1:     # no evidence for either layer
+                w_fg = 0.0
+                w_bg = 0.0
+        return ti.Vector([w_fg, w_bg])
+
+
+@ti.data_oriented
 class WeightPlanes:
     """Row weights held in two ``(H, W)`` planes, ``weight_fg`` and ``weight_bg`` (0 outside
     each region), as the ``weights`` of :meth:`GlobalShapes.fit`.  Each instance is its own
@@ -290,5 +374,5 @@ class WeightPlanes:
         self.weight_fg, self.weight_bg = weight_fg, weight_bg
 
     @ti.func
-    def region_weights(self, y, x):
+    def row_weights(self, y, x):
         return ti.Vector([self.weight_fg[y, x], self.weight_bg[y, x]])

@@ -38,6 +38,7 @@ import math
 import numpy as np
 import taichi as ti
 
+from ..kernels.curves import vertex_offset
 from .matching import cost_at
 
 __all__ = ["BackgroundSweep", "FLAT", "MIN_SHARE", "NEAR", "WIDTH", "choose_plane",
@@ -222,8 +223,7 @@ def plane_vertex(mean, k):
     curve)."""
     c = k + 1.0
     if 0 < k < len(mean) - 1:
-        a, b, d = mean[k - 1], mean[k], mean[k + 1]
-        den = a - 2.0 * b + d
-        if den > 0 and math.isfinite(den):
-            c += min(max(0.5 * (a - d) / den, -0.5), 0.5)
+        t = vertex_offset(mean[k - 1], mean[k], mean[k + 1], 0.0)
+        if math.isfinite(t):
+            c += min(max(t, -0.5), 0.5)
     return c

@@ -19,8 +19,8 @@ The stages and their order are those of the solver (``solver.STAGES``):
 ``shapes``
     Eq. 8: Theta_1 over phi >= 0 and Theta_2 over the visible background (phi < 0 and
     phi_+ < 0), weighted least squares (:func:`numpy.linalg.lstsq`) of the consensus mean with
-    weights (1/sigma^2) ** ``shape_weight_power``; a region with fewer than 6 weighted rows, or
-    a rank-deficient system, keeps its previous shape.  Then, in the first ``reinit_every``
+    weights (1/sigma^2) ** ``WEIGHT_POWER`` (:mod:`lss_kernels.model.shapes`); a region with
+    fewer than 6 weighted rows, or a rank-deficient system, keeps its previous shape.  Then, in the first ``reinit_every``
     iterations and at every re-initialisation, the background's plane sweep (Theta_2 may
     become a fronto-parallel plane).
 ``occlusion``
@@ -55,6 +55,7 @@ import numpy as np
 
 from ..model import FIXED_POINT_STEPS, STAGES
 from . import kernels as ref
+from ..model.shapes import WEIGHT_POWER
 from ..model.sweep import due
 from ..params import BOUNDARY_CLIP, CURVATURE_CLIP, CURVATURE_SIGMA, PHI_SCALE
 from .sweep import background_sweep
@@ -185,7 +186,7 @@ def iteration(state: IterationState, params):
     seconds["downward"], t = now - t, now
 
     # shapes: Eq. 8 over the foreground and the visible background
-    w = precision if p.shape_weight_power == 1 else precision * precision
+    w = precision ** WEIGHT_POWER
     # a consensus whose correspondence falls outside the other image is no evidence
     w = np.where((x - mean < 0) | (x + mean > W - 1), 0.0, w)
     w_fg = np.where(phi >= 0, w, 0.0)
