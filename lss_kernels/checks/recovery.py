@@ -203,6 +203,18 @@ def _check_matches(pair) -> tuple:
     return direction, reach
 
 
+def _on_tooth(run, pair, record):
+    """``run`` whose results are moved to the foreground's tooth
+    (:func:`~lss_kernels.checks.teeth.on_tooth`), what was found recorded as ``tooth``."""
+    from .teeth import on_tooth
+
+    def moved(p):
+        result, extra = run(p)
+        result, record["tooth"] = on_tooth(result, pair.left, pair.right, pair.d_max)
+        return result, extra
+    return moved
+
+
 def with_recovery(run, params, d_max, pair=None):
     """``run(params) -> (result, extra)`` once, and again when the model collapsed (and
     ``params.recover``); returns the ``(result, extra)`` kept, with ``result.recovery`` set.
@@ -228,6 +240,7 @@ def with_recovery(run, params, d_max, pair=None):
         if fraction >= PERIODIC_AREA:
             first_params, second_params = params.replace(**PERIODIC), params
             record["first_params"] = dict(PERIODIC)
+            run = _on_tooth(run, pair, record)
     try:
         result, extra = run(first_params)
     except InitError as error:
