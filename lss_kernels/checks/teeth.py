@@ -22,7 +22,7 @@ occluded strip's width cannot be read from the pair), so no data can choose it.
 """
 import numpy as np
 
-__all__ = ["FINE_STEP", "MARGIN", "MIN_GAIN", "PEAK", "STEP", "UPSAMPLE", "choose_tooth",
+__all__ = ["FINE_STEP", "MARGIN", "MIN_GAIN", "PEAK", "STEP", "TOOTH_DEPTH", "UPSAMPLE", "choose_tooth",
            "on_tooth", "row_period", "upsampled", "warp_cost"]
 
 #: Step of the foreground offsets searched, left-view pixels.
@@ -38,9 +38,10 @@ UPSAMPLE = 4
 MARGIN = 3
 #: Half the rise of the autocorrelation to a peak that marks the foreground's period.
 PEAK = 0.3
-#: The local minima of the inside's difference taken as teeth: no worse than this times the
-#: best.
-TOOTH_RATIO = 2.0
+#: The local minima of the inside's difference taken as teeth: within this fraction of the
+#: curve's range above its lowest minimum (the inside of a solved outline that is off holds
+#: some background, which raises every tooth's difference).
+TOOTH_DEPTH = 0.25
 #: Smallest relative drop of the warp's difference for which another tooth is taken.
 MIN_GAIN = 0.2
 
@@ -227,7 +228,8 @@ def _teeth(left, right, inner, surface, lo, hi):
     """The offsets in ``[lo, hi]`` (not 0) at which the foreground's inside ``inner`` matches
     the right image best: the local minima over steps of ``STEP`` of the mean difference
     between the left image there and the (upsampled) right one at ``x - surface - s``,
-    refined to ``FINE_STEP``, those no worse than ``TOOTH_RATIO`` times the best."""
+    refined to ``FINE_STEP``, those within ``TOOTH_DEPTH`` of the curve's range above the
+    lowest."""
     ys, xs = np.nonzero(inner)
     if xs.size == 0:
         return []
@@ -256,8 +258,9 @@ def _teeth(left, right, inner, surface, lo, hi):
             fine = grid[i] + np.arange(-STEP, STEP + 1e-9, FINE_STEP)
             values = [cost(s) for s in fine]
             minima.append((min(values), float(fine[int(np.argmin(values))])))
-    floor = min(c for c, _ in minima)
-    return [s for c, s in minima if c <= TOOTH_RATIO * floor + 1e-3 and abs(s) > 2 * STEP]
+    floor, top = min(c for c, _ in minima), float(np.max(costs[np.isfinite(costs)]))
+    return [s for c, s in minima
+            if c <= floor + TOOTH_DEPTH * (top - floor) and abs(s) > 2 * STEP]
 
 
 def _eroded(mask, n):
