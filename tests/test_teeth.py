@@ -25,18 +25,21 @@ def scene():
                       texture_bg=stripes)
 
 
-def wrong_tooth(scene, periods=2, shift=-7):
+def wrong_tooth(scene, periods=2, shift=-7, background=0):
     """A Result-like model of ``scene``: the true outline moved ``shift`` columns, the
-    foreground's surface ``periods`` periods too small, the background as true."""
+    foreground's surface ``periods`` periods too small, the background ``background``
+    periods too large."""
     fg = np.roll(scene.fg_left, shift, axis=1)
-    surface = np.where(fg, D_FG - periods * PERIOD, D_BG).astype(np.float32)
+    surface = np.where(fg, D_FG - periods * PERIOD, D_BG + background * PERIOD)
+    surface = surface.astype(np.float32)
     from lss_kernels.model.layers import occlusion_by_layers
     occlusion = occlusion_by_layers(surface, fg.astype(np.int32))
     return SimpleNamespace(foreground=fg, surface=surface, disparity=surface.copy(),
                            occlusion=occlusion, confidence=np.ones(fg.shape, np.float32),
                            phi=np.where(fg, 1.0, -1.0).astype(np.float32), layers=None,
                            theta_fg=np.array([0, 0, 0, 0, 0, D_FG - periods * PERIOD]),
-                           theta_bg=np.array([0, 0, 0, 0, 0, D_BG]), recovery={})
+                           theta_bg=np.array([0, 0, 0, 0, 0, D_BG + background * PERIOD]),
+                           recovery={})
 
 
 def test_the_period_of_the_stripes_is_read_inside_a_mask(scene):
@@ -68,3 +71,20 @@ def test_a_periodic_solve_a_tooth_off_is_moved_to_the_true_one(ti_arch, scene, p
     assert (result.foreground == scene.fg_left).mean() > 0.98
     assert score(result.surface, result.occlusion, scene)["occ_f1"] > max(0.95, f1_before + 0.1)
     assert result.theta_fg[5] == pytest.approx(D_FG, abs=0.5)
+
+
+def test_a_background_left_in_front_of_the_moved_object_goes_to_the_nearest_tooth_behind(
+        ti_arch, scene):
+    # the solve put the background three periods too near (in front of the true object):
+    # the pair cannot say which of its teeth is true (the images are the same), the nearest
+    # one behind the object is taken, and the model is sound
+    pair = CheckedPair(scene.left, scene.right, scene.d_max, tuple(scene.init_ellipse), "left",
+                       Params())
+    result, _ = with_recovery(lambda p: (wrong_tooth(scene, 2, -7, background=3), None),
+                              Params(), pair.d_max, pair)
+    tooth = result.recovery["tooth"]
+    assert tooth["offset"] == pytest.approx(2 * PERIOD, abs=0.5)
+    assert tooth["background_offset"] == pytest.approx(-PERIOD, abs=0.3)
+    assert np.median(result.surface[~result.foreground]) == pytest.approx(D_BG + 2 * PERIOD,
+                                                                          abs=0.3)
+    assert result.recovery["collapse"] is None

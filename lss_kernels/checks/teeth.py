@@ -22,8 +22,8 @@ occluded strip's width cannot be read from the pair), so no data can choose it.
 """
 import numpy as np
 
-__all__ = ["FINE_STEP", "MARGIN", "MIN_GAIN", "PEAK", "STEP", "TOOTH_DEPTH", "UPSAMPLE", "choose_tooth",
-           "on_tooth", "row_period", "upsampled", "warp_cost"]
+__all__ = ["FINE_STEP", "MARGIN", "MIN_GAIN", "MIN_JUMP", "PEAK", "STEP", "TOOTH_DEPTH",
+           "UPSAMPLE", "choose_tooth", "on_tooth", "row_period", "upsampled", "warp_cost"]
 
 #: Step of the foreground offsets searched, left-view pixels.
 STEP = 0.25
@@ -42,6 +42,9 @@ PEAK = 0.3
 #: curve's range above its lowest minimum (the inside of a solved outline that is off holds
 #: some background, which raises every tooth's difference).
 TOOTH_DEPTH = 0.25
+#: Smallest median jump (left-view pixels) of a moved foreground over its background;
+#: as :data:`lss_kernels.checks.recovery.MIN_JUMP`.
+MIN_JUMP = 1.0
 #: Smallest relative drop of the warp's difference for which another tooth is taken.
 MIN_GAIN = 0.2
 
@@ -141,8 +144,9 @@ class _Model:
         """``(foreground, disparity)`` of the moved model."""
         t = int(t)
         fg, front = np.zeros_like(self.foreground), np.zeros_like(self.surface)
+        W = fg.shape[1]
         if t >= 0:
-            fg[:, t:], front[:, t:] = self.foreground[:, :fg.shape[1] - t], self.surface[:, :fg.shape[1] - t]
+            fg[:, t:], front[:, t:] = self.foreground[:, :W - t], self.surface[:, :W - t]
         else:
             fg[:, :t], front[:, :t] = self.foreground[:, -t:], self.surface[:, -t:]
         return fg, np.where(fg, front + s, self.background)
@@ -291,9 +295,18 @@ def on_tooth(result, left, right, d_max):
         return result, info
     solved = np.asarray(result.surface, np.float64)
     plane = plane_of(foreground, solved) if shape == "plane" else None
-    moved_fg, surface = _Model(foreground, solved, plane).at(s, t)
+    model = _Model(foreground, solved, plane)
+    moved_fg, surface = model.at(s, t)
     refined = _Model(foreground, np.asarray(result.disparity, np.float64),
                      plane).at(s, t)[1]
+    back = _behind(left, moved_fg, surface, model.background)
+    info["background_offset"] = back
+    if back:
+        surface = np.where(moved_fg, surface, surface + back)
+        refined = np.where(moved_fg, refined, refined + back)
+        theta_bg = np.array(result.theta_bg, dtype=np.float64)
+        theta_bg[5] += back
+        result.theta_bg = theta_bg.astype(np.asarray(result.theta_bg).dtype)
     clean = lambda d: np.clip(d, 0.0, d_max).astype(np.float32)
     result.foreground, result.surface, result.disparity = moved_fg, clean(surface), clean(refined)
     result.occlusion = occlusion_by_layers(result.surface, moved_fg.astype(np.int32))
@@ -312,6 +325,28 @@ def on_tooth(result, left, right, d_max):
     result.theta_fg = theta.astype(np.asarray(result.theta_fg).dtype)
     result.phi = _shifted_rows(np.asarray(result.phi, np.float32), t - s / 2.0)
     return result, info
+
+
+def _behind(left, foreground, surface, background):
+    """The whole number of background periods (:func:`row_period` of ``left`` outside
+    ``foreground``), as a negative offset in pixels, that puts the background (``background``
+    under the object) at least ``MIN_JUMP`` behind the foreground's ``surface`` over the
+    median of the object; 0 when it already lies so, or when the background is not
+    periodic.  A periodic background's tooth is not in the pair (module text): of the teeth
+    behind the object, the nearest to the one solved."""
+    if not foreground.any() or foreground.all():
+        return 0.0
+    jump = float(np.median(surface[foreground] - background[foreground]))
+    if jump >= MIN_JUMP:
+        return 0.0
+    period = row_period(left, _eroded(~foreground, 2))
+    if period is None:
+        return 0.0
+    periods = np.ceil((MIN_JUMP - jump) / period)
+    offset = -periods * period
+    if np.median(background[~foreground]) + offset < 0.0:
+        return 0.0
+    return float(offset)
 
 
 def _shifted_rows(plane, shift):
