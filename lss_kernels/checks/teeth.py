@@ -22,11 +22,16 @@ occluded strip's width cannot be read from the pair), so no data can choose it.
 """
 import numpy as np
 
-__all__ = ["FINE_STEP", "MARGIN", "MIN_GAIN", "MIN_JUMP", "PEAK", "STEP", "TOOTH_DEPTH",
+__all__ = ["FINE_STEP", "HIDDEN_COST", "MARGIN", "MIN_GAIN", "MIN_JUMP", "PEAK", "STEP", "TOOTH_DEPTH",
            "UPSAMPLE", "choose_tooth", "on_tooth", "row_period", "upsampled", "warp_cost"]
 
 #: Step of the foreground offsets searched, left-view pixels.
 STEP = 0.25
+#: What a left pixel the right camera does not see (hidden, or beyond the right image's
+#: edge) costs in :func:`warp_cost`, a fraction of the grey range: without it, a model that
+#: hides more pixels leaves out more differences, and a tooth too far in front can hide the
+#: very stripes that would give it away.
+HIDDEN_COST = 0.05
 #: Step of the search around the best offset, left-view pixels.
 FINE_STEP = 0.05
 #: Factor by which the right image's rows are resampled (band-limited, by FFT) before they
@@ -95,7 +100,7 @@ def warp_cost(left, right, foreground, disparity, factor=1):
     t = (r - i0)[:, None]
     sampled = (1 - t) * right[ys, i0] + t * right[ys, i0 + 1]
     diff = np.abs(left[ys, xs] - sampled).mean(axis=-1)
-    return float(diff.mean()) if diff.size else np.inf, int(diff.size)
+    return float((diff.sum() + HIDDEN_COST * (H * W - diff.size)) / (H * W)), int(diff.size)
 
 
 def row_period(image, mask, max_period=48):
@@ -211,7 +216,8 @@ def choose_tooth(left, right, foreground, surface, d_max):
             best, best_cost = (*found, shape), found_cost
     info.update(best_offset=best[0], best_shift=best[1], best_shape=best[2],
                 best_cost=best_cost)
-    if best[:2] != (0.0, 0) and best_cost < (1.0 - MIN_GAIN) * base:
+    # the solved tooth, its surface made a plane or its outline moved, is no other tooth
+    if abs(best[0]) >= period / 2 and best_cost < (1.0 - MIN_GAIN) * base:
         info.update(offset=best[0], shift=best[1], shape=best[2])
         return best, info
     return (0.0, 0, "solved"), info
@@ -264,7 +270,7 @@ def _teeth(left, right, inner, surface, lo, hi):
             minima.append((min(values), float(fine[int(np.argmin(values))])))
     floor, top = min(c for c, _ in minima), float(np.max(costs[np.isfinite(costs)]))
     return [s for c, s in minima
-            if c <= floor + TOOTH_DEPTH * (top - floor) and abs(s) > 2 * STEP]
+            if c <= floor + TOOTH_DEPTH * (top - floor)]
 
 
 def _eroded(mask, n):
