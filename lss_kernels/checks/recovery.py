@@ -41,7 +41,9 @@ the left image is examined first (:mod:`lss_kernels.checks.periodicity`).  When 
 ``PERIODIC_AREA`` of its tiles are periodic, the first solve
 uses ``PERIODIC`` -- ``RECOVERY`` without the refinement, whose residuals need distinct
 matches (on stripes they lie whole periods off) -- and the retry, if its model collapses,
-the given parameters.
+the given parameters.  Each solve of a periodic pair then has its foreground moved to the
+tooth whose outline the right image shows (:mod:`lss_kernels.checks.teeth`, recorded as
+``tooth``) before its model is judged.
 """
 import contextlib
 import warnings
@@ -223,7 +225,9 @@ def with_recovery(run, params, d_max, pair=None):
     the left image of ``pair`` (a :class:`~lss_kernels.checks.pair.CheckedPair`) is
     periodic over at least ``PERIODIC_AREA`` of its tiles, the first uses ``params``
     changed by ``PERIODIC`` and the second ``params`` (at once, without a retry, when the
-    first finds no initial region: :class:`~lss_kernels.start_types.InitError`).  ``params``
+    first finds no initial region: :class:`~lss_kernels.start_types.InitError`), and each
+    result is moved to its foreground's tooth (:func:`~lss_kernels.checks.teeth.on_tooth`,
+    recorded as ``tooth``) before it is judged.  ``params``
     None: the defaults; ``d_max``: the searched range (left-view pixels).  With ``pair``,
     it is first checked for swapped views and a search range that is too short
     (:mod:`lss_kernels.checks.direction`, recorded as ``direction`` and ``range``): a
