@@ -1,29 +1,36 @@
-"""The foreground's tooth on periodic texture: the offset of the object's surface that makes
-its outline land where the right image shows it.
+"""The foreground's tooth on periodic texture: the offset of the object's surface, and the
+move of its outline, that make the outline land where the right image shows it.
 
 On stripes a whole period is a valid match for either layer, and the alternation can settle
-with Theta_1 some periods off (the matches inside the object cannot tell).  The object's
+with Theta_1 some periods off, its outline moved with it (the matches inside the object
+cannot tell; ``periodic_same_*`` of ``lss_kernels.stress --periodic``).  The object's
 outline is not periodic: where the object's stripes meet the background's (another phase,
 period or colour), the right image shows the outline at ``x - d_fg``, and only the true
-tooth puts it there.  So, after a solve of a periodic pair, the left image is warped to the
-right by the model, the foreground's surface moved by constant offsets ``s`` over the whole
-searched range (steps of ``STEP`` px, the background's surface as solved), with the
-occlusion each offset implies; the offset whose warp differs least from the right image
-(mean absolute difference over the left pixels seen by the right camera, occluded pixels
-costing nothing) is taken when it explains the pair better than the solved model by more
-than ``MIN_GAIN`` of its difference.
+tooth puts it there.  So, after each solve of a periodic pair
+(:func:`~lss_kernels.checks.recovery.with_recovery`), the left image is warped onto the right
+one (:func:`warp_cost`: the right image's rows resampled ``UPSAMPLE`` times by FFT, the
+occlusion each model implies, a hidden pixel costing ``HIDDEN_COST``).  The candidates are
+the foreground's surface as solved and as a plane fitted to it, each moved by the offsets
+``s`` where the inside of the object matches best (the dips of :func:`_teeth`, a period
+apart: :func:`row_period`), with the outline moved by ``t`` columns between 0 and ``s``
+(``MARGIN`` beyond); the best is refined to ``FINE_STEP`` px and a column.  It is taken when
+``|s|`` is at least half a period and its warp differs from the right image by
+``MIN_GAIN`` less than the solved model's.
 
 A wrong tooth ``k`` periods too small leaves about ``2 k P`` pixels a row mismatched (the
 object's last stripes land on the background, and background pixels that are hidden are
 taken as seen), one too large about ``k P``; the right one none.  The background's tooth is
-left as solved: with a periodic background of constant disparity the right image is the
-same for ``d_bg`` and ``d_bg + P`` (every background pixel matches a period away, and the
-occluded strip's width cannot be read from the pair), so no data can choose it.
+not in the pair: with a periodic background of constant disparity the two images are the
+same, pixel for pixel, for ``d_bg`` and ``d_bg + P`` (every background pixel matches a
+period away, and the occluded strip's width cannot be read).  It is left as solved, unless
+it lies less than ``MIN_JUMP`` behind the moved object: then it goes to the nearest of its
+teeth behind (:func:`_behind`).
 """
 import numpy as np
 
-__all__ = ["FINE_STEP", "HIDDEN_COST", "MARGIN", "MIN_GAIN", "MIN_JUMP", "PEAK", "STEP", "TOOTH_DEPTH",
-           "UPSAMPLE", "choose_tooth", "on_tooth", "row_period", "upsampled", "warp_cost"]
+__all__ = ["FINE_STEP", "HIDDEN_COST", "MARGIN", "MIN_GAIN", "MIN_JUMP", "PEAK", "STEP",
+           "TOOTH_DEPTH", "UPSAMPLE", "choose_tooth", "on_tooth", "row_period", "upsampled",
+           "warp_cost"]
 
 #: Step of the foreground offsets searched, left-view pixels.
 STEP = 0.25
@@ -80,12 +87,13 @@ def upsampled(image, factor=UPSAMPLE):
 
 
 def warp_cost(left, right, foreground, disparity, factor=1):
-    """Mean absolute difference (over channels and over the left pixels seen by the right
-    camera and landing inside it) between the left image and the right image sampled at
-    ``x - disparity`` (linear in x); a background pixel is hidden when a foreground pixel
-    lands on its right column.  ``left``, ``right`` ``(H, W, C)``; ``foreground`` bool and
-    ``disparity`` ``(H, W)``, left view.  Returns ``(cost, seen)``: the mean and the number
-    of pixels it is over."""
+    """How far the left image is from the right one sampled at ``x - disparity`` (linear in
+    x; ``right`` may be :func:`upsampled` by ``factor``): the absolute difference (mean over
+    channels) summed over the left pixels the right camera sees, plus ``HIDDEN_COST`` for
+    every other pixel (hidden: a background pixel on whose right column a foreground pixel
+    lands; or landing outside the right image), over the number of pixels.  ``left``,
+    ``right`` ``(H, W, C)``; ``foreground`` bool and ``disparity`` ``(H, W)``, left view.
+    Returns ``(cost, seen)``, ``seen`` the number of pixels seen."""
     H, W = foreground.shape
     x = np.arange(W, dtype=np.float64)[None, :]
     right_x = x - disparity
@@ -158,13 +166,13 @@ class _Model:
 
 
 def choose_tooth(left, right, foreground, surface, d_max):
-    """The move of the foreground that best explains the pair (:func:`warp_cost`): its
-    surface by ``s`` px (whole periods of the foreground's texture, :func:`row_period`, kept
-    in ``[0, d_max]``) and its outline in the left view by ``t`` columns (between 0 and
-    ``s``, and ``MARGIN`` beyond), the background as ``surface`` gives it; then ``s`` to
-    ``FINE_STEP`` and ``t`` to a column around the best.  Returns ``(s, t, info)``: 0, 0
-    when none beats the solved model by ``MIN_GAIN``; ``info`` the period and the costs of
-    the solved model and of the best move."""
+    """The move of the foreground that best explains the pair (:func:`warp_cost`), as the
+    module text says: its surface (``shape``: as ``surface`` gives it, ``"solved"``, or the
+    plane fitted to it, ``"plane"``) by ``s`` px and its outline in the left view by ``t``
+    columns, the background as ``surface`` gives it.  ``left``, ``right`` ``(H, W, C)``,
+    ``foreground`` and ``surface`` ``(H, W)``, left view.  Returns ``((s, t, shape),
+    info)``: ``(0, 0, "solved")`` when no other tooth beats the solved model by
+    ``MIN_GAIN`` (or the foreground has no period); ``info`` the period and the costs."""
     left = np.asarray(left, np.float64)
     right = np.asarray(right, np.float64)
     if left.ndim == 2:
