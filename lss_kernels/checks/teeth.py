@@ -12,7 +12,9 @@ one (:func:`warp_cost`: the right image's rows resampled ``UPSAMPLE`` times by F
 occlusion each model implies, a hidden pixel costing ``HIDDEN_COST``).  The candidates are
 the foreground's surface as solved and as a plane fitted to it, each moved by the offsets
 ``s`` where the inside of the object matches best (the dips of :func:`_teeth`, a period
-apart: :func:`row_period`), with the outline moved by ``t`` columns between 0 and ``s``
+apart: :func:`row_period`), and for each such tooth the plane fitted to the inside's own
+matches within half a period of it (:func:`_refit`: a bent solved surface is no tooth
+anywhere), with the outline moved by ``t`` columns between 0 and ``s``
 (``MARGIN`` beyond); the best is refined to ``FINE_STEP`` px and a column.  It is taken when
 ``|s|`` is at least half a period and its warp differs from the right image by
 ``MIN_GAIN`` less than the solved model's.
@@ -28,9 +30,9 @@ teeth behind (:func:`_behind`).
 """
 import numpy as np
 
-__all__ = ["FINE_STEP", "HIDDEN_COST", "MARGIN", "MIN_GAIN", "MIN_JUMP", "PEAK", "STEP",
-           "TOOTH_DEPTH", "UPSAMPLE", "choose_tooth", "on_tooth", "row_period", "upsampled",
-           "warp_cost"]
+__all__ = ["FINE_STEP", "HIDDEN_COST", "MARGIN", "MIN_GAIN", "MIN_JUMP", "PEAK", "REFIT_RADIUS",
+           "STEP", "TOOTH_DEPTH", "UPSAMPLE", "choose_tooth", "on_tooth", "row_period",
+           "upsampled", "warp_cost"]
 
 #: Step of the foreground offsets searched, left-view pixels.
 STEP = 0.25
@@ -57,6 +59,9 @@ TOOTH_DEPTH = 0.25
 #: Smallest median jump (left-view pixels) of a moved foreground over its background;
 #: as :data:`lss_kernels.checks.recovery.MIN_JUMP`.
 MIN_JUMP = 1.0
+#: Half the side of the square over which a pixel's differences are summed when a tooth's
+#: plane is fitted to the matches.
+REFIT_RADIUS = 2
 #: Smallest relative drop of the warp's difference for which another tooth is taken.
 MIN_GAIN = 0.2
 
@@ -180,33 +185,50 @@ def choose_tooth(left, right, foreground, surface, d_max):
     foreground = np.asarray(foreground, bool)
     surface = np.asarray(surface, np.float64)
     info = {"offset": 0.0, "shift": 0, "shape": "solved"}
-    if not foreground.any() or foreground.all():
-        return (0.0, 0, "solved"), info
+    if not foreground.any() or foreground.all() or foreground.shape != left.shape[:2]:
+        return (0.0, 0, None), info
     period = row_period(left, _eroded(foreground, 2))
-    info["period"] = period
+    behind = row_period(left, _eroded(~foreground, 2))
+    info.update(period=period, background_period=behind)
     if period is None:
-        return (0.0, 0, "solved"), info
+        return (0.0, 0, None), info
+    info["full_shape"] = foreground.shape
     rows = np.nonzero(foreground.any(axis=1))[0]
     y0, y1 = max(rows[0] - 2, 0), rows[-1] + 3
     left, foreground, surface = left[y0:y1], foreground[y0:y1], surface[y0:y1]
     right = upsampled(right[y0:y1])
-    best, best_cost, base = (0.0, 0, "solved"), np.inf, None
-    for shape, front in (("solved", None), ("plane", plane_of(foreground, surface))):
+    best, best_cost, base = (0.0, 0, "solved", None), np.inf, None
+    plane = plane_of(foreground, surface)
+    inner = _eroded(foreground, 3)
+    shapes = [("solved", None, None), ("plane", plane, None)]
+    while shapes:
+        shape, front, teeth = shapes.pop(0)
         model = _Model(foreground, surface, front)
         inside = model.surface[foreground]
 
         def cost_of(s, t):
             fg, disparity = model.at(s, t)
+            back = _behind(fg, disparity, model.background, behind)
+            if back:
+                disparity = np.where(fg, disparity, disparity + back)
             return warp_cost(left, right, fg, disparity, UPSAMPLE)[0]
 
         if base is None:
             base = cost_of(0.0, 0)
             info["cost"] = base
             best_cost = base
+        if teeth is None:
+            teeth = _teeth(left, right, inner, model.surface, -inside.min(),
+                           float(d_max) - inside.max())
+        if shape == "plane":
+            # each tooth's own plane, fitted to the inside's matches within half a period
+            for s in teeth:
+                coef = _refit(left, right, inner, model.surface + s, period)
+                if coef is not None:
+                    shapes.append(("refit", _plane(coef, foreground.shape), [0.0]))
         found, found_cost = None, np.inf
-        for s in _teeth(left, right, _eroded(foreground, 3), model.surface,
-                        -inside.min(), float(d_max) - inside.max()):
-            lo, hi = sorted((0, int(round(s))))
+        for s in teeth:
+            lo, hi = sorted((0, int(round(s + np.median(inside) - np.median(surface[foreground])))))
             for t in range(lo - MARGIN, hi + MARGIN + 1):
                 cost = cost_of(s, t)
                 if cost < found_cost:
@@ -219,16 +241,76 @@ def choose_tooth(left, right, foreground, surface, d_max):
                 cost = cost_of(s, t)
                 if cost < found_cost:
                     found, found_cost = (float(s), t), cost
-        info[f"{shape}_cost"] = found_cost
+        info[f"{shape}_cost"] = min(found_cost, info.get(f"{shape}_cost", np.inf))
         if found_cost < best_cost:
-            best, best_cost = (*found, shape), found_cost
-    info.update(best_offset=best[0], best_shift=best[1], best_shape=best[2],
-                best_cost=best_cost)
+            best, best_cost = (*found, shape, front), found_cost
+    s, t, shape, front = best
+    # the offset of the foreground's surface from the solved one, over the object
+    offset = s if front is None else float(np.median(front[foreground] + s
+                                                     - surface[foreground]))
+    info.update(best_offset=offset, best_shift=t, best_shape=shape, best_cost=best_cost)
     # the solved tooth, its surface made a plane or its outline moved, is no other tooth
-    if abs(best[0]) >= period / 2 and best_cost < (1.0 - MIN_GAIN) * base:
-        info.update(offset=best[0], shift=best[1], shape=best[2])
-        return best, info
-    return (0.0, 0, "solved"), info
+    if abs(offset) >= period / 2 and best_cost < (1.0 - MIN_GAIN) * base:
+        info.update(offset=offset, shift=t, shape=shape)
+        full = None
+        if front is not None:       # the plane in the whole image's rows
+            full = _plane(_coefficients(front, foreground), info["full_shape"], y0)
+        return (s, t, full), info
+    return (0.0, 0, None), info
+
+
+def _coefficients(plane, mask):
+    """``(a, b, c)`` of the plane ``a x + b y + c`` that ``plane`` holds (least squares
+    over ``mask``)."""
+    ys, xs = np.nonzero(mask)
+    A = np.stack([xs, ys, np.ones_like(xs)], axis=1).astype(np.float64)
+    return np.linalg.lstsq(A, plane[ys, xs], rcond=None)[0]
+
+
+def _plane(coef, shape, y0=0):
+    """The plane ``a x + b (y - y0) + c`` on a grid of ``shape``."""
+    H, W = shape
+    yy, xx = np.mgrid[0:H, 0:W]
+    return coef[0] * xx + coef[1] * (yy - y0) + coef[2]
+
+
+def _refit(left, right, inner, front, period):
+    """``(a, b, c)`` of the plane fitted to the disparities, within half a ``period`` of
+    ``front``, at which each pixel of ``inner`` matches best (differences summed over a
+    ``2 REFIT_RADIUS + 1`` square), the pixels more than a pixel off the first fit left out
+    of the second; None for an empty ``inner``."""
+    ys, xs = np.nonzero(inner)
+    if xs.size < 10:
+        return None
+    H, W = inner.shape
+    width = right.shape[1]
+    deltas = np.arange(-period / 2, period / 2, STEP)
+    best = np.full(xs.size, np.inf)
+    chosen = np.zeros(xs.size)
+    for delta in deltas:
+        r = np.clip((xs - front[ys, xs] - delta) * UPSAMPLE, 0, width - 1)
+        i0 = np.minimum(np.floor(r).astype(np.int64), width - 2)
+        f = (r - i0)[:, None]
+        sampled = (1 - f) * right[ys, i0] + f * right[ys, i0 + 1]
+        diff = np.zeros((H, W))
+        diff[ys, xs] = np.abs(left[ys, xs] - sampled).mean(axis=-1)
+        summed = _box(diff, REFIT_RADIUS)[ys, xs]
+        better = summed < best
+        best[better], chosen[better] = summed[better], delta
+    d = front[ys, xs] + chosen
+    A = np.stack([xs, ys, np.ones_like(xs)], axis=1).astype(np.float64)
+    coef = np.linalg.lstsq(A, d, rcond=None)[0]
+    keep = np.abs(A @ coef - d) <= 1.0
+    if keep.sum() >= 10:
+        coef = np.linalg.lstsq(A[keep], d[keep], rcond=None)[0]
+    return coef
+
+
+def _box(a, r):
+    """Sums of ``a`` over ``(2 r + 1)``-square windows (zeros beyond the edges)."""
+    c = np.pad(a, ((r + 1, r), (r + 1, r))).cumsum(axis=0).cumsum(axis=1)
+    n = 2 * r + 1
+    return c[n:, n:] - c[:-n, n:] - c[n:, :-n] + c[:-n, :-n]
 
 
 def plane_of(foreground, surface):
@@ -304,16 +386,15 @@ def on_tooth(result, left, right, d_max):
     (the cyclopean frame).  Returns ``(result, info)``; ``result`` is changed in place."""
     from ..model.layers import occlusion_by_layers
     foreground = np.asarray(result.foreground, bool)
-    (s, t, shape), info = choose_tooth(left, right, foreground, result.surface, d_max)
-    if s == 0.0 and t == 0:
+    (s, t, plane), info = choose_tooth(left, right, foreground, result.surface, d_max)
+    if s == 0.0 and t == 0 and plane is None:
         return result, info
     solved = np.asarray(result.surface, np.float64)
-    plane = plane_of(foreground, solved) if shape == "plane" else None
     model = _Model(foreground, solved, plane)
     moved_fg, surface = model.at(s, t)
     refined = _Model(foreground, np.asarray(result.disparity, np.float64),
                      plane).at(s, t)[1]
-    back = _behind(left, moved_fg, surface, model.background)
+    back = _behind(moved_fg, surface, model.background, info.get("background_period"))
     info["background_offset"] = back
     if back:
         surface = np.where(moved_fg, surface, surface + back)
@@ -328,7 +409,7 @@ def on_tooth(result, left, right, d_max):
     if result.layers is not None:
         result.layers = moved_fg.astype(np.uint8)
     theta = np.array(result.theta_fg, dtype=np.float64)
-    if shape == "plane":
+    if plane is not None:
         # d = a x_left + b y + c with x_left = x_cyclopean + d / 2
         ys, xs = np.nonzero(moved_fg)
         A = np.stack([xs, ys, np.ones_like(xs)], axis=1).astype(np.float64)
@@ -337,13 +418,13 @@ def on_tooth(result, left, right, d_max):
     else:
         theta[5] += s
     result.theta_fg = theta.astype(np.asarray(result.theta_fg).dtype)
-    result.phi = _shifted_rows(np.asarray(result.phi, np.float32), t - s / 2.0)
+    result.phi = _shifted_rows(np.asarray(result.phi, np.float32), t - info["offset"] / 2.0)
     return result, info
 
 
-def _behind(left, foreground, surface, background):
-    """The whole number of background periods (:func:`row_period` of ``left`` outside
-    ``foreground``), as a negative offset in pixels, that puts the background (``background``
+def _behind(foreground, surface, background, period):
+    """The whole number of background periods (``period``, None: the background is not
+    periodic), as a negative offset in pixels, that puts the background (``background``
     under the object) at least ``MIN_JUMP`` behind the foreground's ``surface`` over the
     median of the object; 0 when it already lies so, or when the background is not
     periodic.  A periodic background's tooth is not in the pair (module text): of the teeth
@@ -351,10 +432,7 @@ def _behind(left, foreground, surface, background):
     if not foreground.any() or foreground.all():
         return 0.0
     jump = float(np.median(surface[foreground] - background[foreground]))
-    if jump >= MIN_JUMP:
-        return 0.0
-    period = row_period(left, _eroded(~foreground, 2))
-    if period is None:
+    if jump >= MIN_JUMP or period is None:
         return 0.0
     periods = np.ceil((MIN_JUMP - jump) / period)
     offset = -periods * period
