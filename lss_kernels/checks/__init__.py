@@ -7,6 +7,7 @@
 - :mod:`.periodicity`: periodic texture along the rows;
 - :mod:`.photometry`: the photometric difference between the views, and its correction;
 - :mod:`.direction`: swapped views, a search range too short, a range for a pair given none;
+- :mod:`.teeth`: on a periodic pair, the foreground moved to the tooth the outline shows;
 - :mod:`.recovery`: a collapsed model recognised and solved again;
 - :mod:`.around`: :func:`~lss_kernels.solve`, these checks around a solver.
 """

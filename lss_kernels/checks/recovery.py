@@ -41,7 +41,9 @@ the left image is examined first (:mod:`lss_kernels.checks.periodicity`).  When 
 ``PERIODIC_AREA`` of its tiles are periodic, the first solve
 uses ``PERIODIC`` -- ``RECOVERY`` without the refinement, whose residuals need distinct
 matches (on stripes they lie whole periods off) -- and the retry, if its model collapses,
-the given parameters.
+the given parameters.  Each solve of a periodic pair then has its foreground moved to the
+tooth whose outline the right image shows (:mod:`lss_kernels.checks.teeth`, recorded as
+``tooth``) before its model is judged.
 """
 import contextlib
 import warnings
@@ -203,6 +205,18 @@ def _check_matches(pair) -> tuple:
     return direction, reach
 
 
+def _on_tooth(run, pair, record):
+    """``run`` whose results are moved to the foreground's tooth
+    (:func:`~lss_kernels.checks.teeth.on_tooth`), what was found recorded as ``tooth``."""
+    from .teeth import on_tooth
+
+    def moved(p):
+        result, extra = run(p)
+        result, record["tooth"] = on_tooth(result, pair.left, pair.right, pair.d_max)
+        return result, extra
+    return moved
+
+
 def with_recovery(run, params, d_max, pair=None):
     """``run(params) -> (result, extra)`` once, and again when the model collapsed (and
     ``params.recover``); returns the ``(result, extra)`` kept, with ``result.recovery`` set.
@@ -211,7 +225,9 @@ def with_recovery(run, params, d_max, pair=None):
     the left image of ``pair`` (a :class:`~lss_kernels.checks.pair.CheckedPair`) is
     periodic over at least ``PERIODIC_AREA`` of its tiles, the first uses ``params``
     changed by ``PERIODIC`` and the second ``params`` (at once, without a retry, when the
-    first finds no initial region: :class:`~lss_kernels.start_types.InitError`).  ``params``
+    first finds no initial region: :class:`~lss_kernels.start_types.InitError`), and each
+    result is moved to its foreground's tooth (:func:`~lss_kernels.checks.teeth.on_tooth`,
+    recorded as ``tooth``) before it is judged.  ``params``
     None: the defaults; ``d_max``: the searched range (left-view pixels).  With ``pair``,
     it is first checked for swapped views and a search range that is too short
     (:mod:`lss_kernels.checks.direction`, recorded as ``direction`` and ``range``): a
@@ -228,6 +244,7 @@ def with_recovery(run, params, d_max, pair=None):
         if fraction >= PERIODIC_AREA:
             first_params, second_params = params.replace(**PERIODIC), params
             record["first_params"] = dict(PERIODIC)
+            run = _on_tooth(run, pair, record)
     try:
         result, extra = run(first_params)
     except InitError as error:
