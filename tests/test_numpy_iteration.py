@@ -132,8 +132,9 @@ def test_one_iteration_at_a_width_of_partial_lane_blocks(fresh_taichi):
 
 
 @pytest.mark.parametrize("switch", [{"subpixel_messages": False}, {"narrow_band": 0.0},
-                                    {"message_ambiguity": 0.9}],
-                         ids=["integer_argmin", "no_narrow_band", "message_ambiguity"])
+                                    {"message_ambiguity": 0.9}, {"background_sweep": 0.0}],
+                         ids=["integer_argmin", "no_narrow_band", "message_ambiguity",
+                              "no_background_sweep"])
 def test_the_papers_switches_match_the_specification(fresh_taichi, switch):
     """The iteration with the switches that ``Params.paper()`` turns to the paper's method
     (Eq. 5's integer argmin; Eq. 2's step everywhere, no narrow band) and with the messages
