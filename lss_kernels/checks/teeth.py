@@ -30,6 +30,9 @@ teeth behind (:func:`_behind`).
 """
 import numpy as np
 
+from .direction import box_sums
+from .validate import luma
+
 __all__ = ["FINE_STEP", "HIDDEN_COST", "MARGIN", "MIN_GAIN", "MIN_JUMP", "PEAK", "REFIT_RADIUS",
            "STEP", "TOOTH_DEPTH", "UPSAMPLE", "choose_tooth", "on_tooth", "row_period",
            "upsampled", "warp_cost"]
@@ -80,6 +83,14 @@ def _cover(foreground, right_x):
     return cover[:, 1:W + 1]
 
 
+def _sample(right, ys, r):
+    """``right`` ``(H, W', C)`` at the fractional columns ``r`` of the rows ``ys``, linearly
+    (``r`` within ``[0, W' - 1]``); returns ``(N, C)``."""
+    i0 = np.minimum(np.floor(r).astype(np.int64), right.shape[1] - 2)
+    t = (r - i0)[:, None]
+    return (1 - t) * right[ys, i0] + t * right[ys, i0 + 1]
+
+
 def upsampled(image, factor=UPSAMPLE):
     """``image`` ``(H, W, C)`` with its rows resampled ``factor`` times as finely (zero-padded
     spectrum of the row mirrored onto itself, so that its ends do not wrap); column ``i`` of
@@ -107,11 +118,7 @@ def warp_cost(left, right, foreground, disparity, factor=1):
     hidden = ~foreground & np.take_along_axis(cover, column, axis=1)
     seen = ~hidden & (right_x >= 0) & (right_x <= W - 1)
     ys, xs = np.nonzero(seen)
-    r = right_x[ys, xs]
-    r = r * factor
-    i0 = np.minimum(np.floor(r).astype(np.int64), right.shape[1] - 2)
-    t = (r - i0)[:, None]
-    sampled = (1 - t) * right[ys, i0] + t * right[ys, i0 + 1]
+    sampled = _sample(right, ys, right_x[ys, xs] * factor)
     diff = np.abs(left[ys, xs] - sampled).mean(axis=-1)
     return float((diff.sum() + HIDDEN_COST * (H * W - diff.size)) / (H * W)), int(diff.size)
 
@@ -121,8 +128,7 @@ def row_period(image, mask, max_period=48):
     first lag at which the normalised autocorrelation of the horizontal gradient of grey,
     over the pairs of pixels both inside ``mask``, peaks ``2 PEAK`` above its lowest value at
     a smaller lag (parabolic to a fraction of a pixel); None when it never does."""
-    grey = np.asarray(image, np.float64).mean(axis=-1)
-    g = np.diff(grey, axis=1)
+    g = np.diff(luma(image), axis=1)
     m = mask[:, 1:] & mask[:, :-1]
     rho = np.full(max_period + 2, np.nan)
     for lag in range(1, max_period + 2):
@@ -259,12 +265,16 @@ def choose_tooth(left, right, foreground, surface, d_max):
     return (0.0, 0, None), info
 
 
+def _rows(xs, ys):
+    """The rows ``(x, y, 1)`` of a plane's least squares."""
+    return np.stack([xs, ys, np.ones_like(xs)], axis=1).astype(np.float64)
+
+
 def _coefficients(plane, mask):
     """``(a, b, c)`` of the plane ``a x + b y + c`` that ``plane`` holds (least squares
     over ``mask``)."""
     ys, xs = np.nonzero(mask)
-    A = np.stack([xs, ys, np.ones_like(xs)], axis=1).astype(np.float64)
-    return np.linalg.lstsq(A, plane[ys, xs], rcond=None)[0]
+    return np.linalg.lstsq(_rows(xs, ys), plane[ys, xs], rcond=None)[0]
 
 
 def _plane(coef, shape, y0=0):
@@ -289,16 +299,14 @@ def _refit(left, right, inner, front, period):
     chosen = np.zeros(xs.size)
     for delta in deltas:
         r = np.clip((xs - front[ys, xs] - delta) * UPSAMPLE, 0, width - 1)
-        i0 = np.minimum(np.floor(r).astype(np.int64), width - 2)
-        f = (r - i0)[:, None]
-        sampled = (1 - f) * right[ys, i0] + f * right[ys, i0 + 1]
+        sampled = _sample(right, ys, r)
         diff = np.zeros((H, W))
         diff[ys, xs] = np.abs(left[ys, xs] - sampled).mean(axis=-1)
-        summed = _box(diff, REFIT_RADIUS)[ys, xs]
+        summed = box_sums(np.pad(diff, REFIT_RADIUS), 2 * REFIT_RADIUS + 1)[ys, xs]
         better = summed < best
         best[better], chosen[better] = summed[better], delta
     d = front[ys, xs] + chosen
-    A = np.stack([xs, ys, np.ones_like(xs)], axis=1).astype(np.float64)
+    A = _rows(xs, ys)
     coef = np.linalg.lstsq(A, d, rcond=None)[0]
     keep = np.abs(A @ coef - d) <= 1.0
     if keep.sum() >= 10:
@@ -306,22 +314,10 @@ def _refit(left, right, inner, front, period):
     return coef
 
 
-def _box(a, r):
-    """Sums of ``a`` over ``(2 r + 1)``-square windows (zeros beyond the edges)."""
-    c = np.pad(a, ((r + 1, r), (r + 1, r))).cumsum(axis=0).cumsum(axis=1)
-    n = 2 * r + 1
-    return c[n:, n:] - c[:-n, n:] - c[n:, :-n] + c[:-n, :-n]
-
-
 def plane_of(foreground, surface):
     """The plane ``a x + b y + c`` fitted (least squares) to ``surface`` over
     ``foreground``, evaluated on the whole grid."""
-    ys, xs = np.nonzero(foreground)
-    A = np.stack([xs, ys, np.ones_like(xs)], axis=1).astype(np.float64)
-    coef = np.linalg.lstsq(A, surface[ys, xs], rcond=None)[0]
-    H, W = foreground.shape
-    yy, xx = np.mgrid[0:H, 0:W]
-    return coef[0] * xx + coef[1] * yy + coef[2]
+    return _plane(_coefficients(surface, foreground), foreground.shape)
 
 
 def _teeth(left, right, inner, surface, lo, hi):
@@ -341,9 +337,7 @@ def _teeth(left, right, inner, surface, lo, hi):
         ok = (r >= 0) & (r <= width - 1)
         if ok.sum() < 0.5 * xs.size:
             return np.inf
-        i0 = np.minimum(np.floor(r[ok]).astype(np.int64), width - 2)
-        f = (r[ok] - i0)[:, None]
-        sampled = (1 - f) * right[ys[ok], i0] + f * right[ys[ok], i0 + 1]
+        sampled = _sample(right, ys[ok], r[ok])
         return float(np.abs(pixels[ok] - sampled).mean())
 
     grid = np.arange(lo, hi + 1e-9, STEP)
@@ -411,9 +405,7 @@ def on_tooth(result, left, right, d_max):
     theta = np.array(result.theta_fg, dtype=np.float64)
     if plane is not None:
         # d = a x_left + b y + c with x_left = x_cyclopean + d / 2
-        ys, xs = np.nonzero(moved_fg)
-        A = np.stack([xs, ys, np.ones_like(xs)], axis=1).astype(np.float64)
-        a, b, c = np.linalg.lstsq(A, surface[ys, xs], rcond=None)[0]
+        a, b, c = _coefficients(surface, moved_fg)
         theta[:] = np.array([0.0, 0.0, 0.0, a, b, c]) / (1.0 - a / 2.0)
     else:
         theta[5] += s
