@@ -60,10 +60,11 @@ class Result:
         baseline's unit; inf where unknown) for a :class:`~lss_kernels.calib.Calibration`."""
         return calib.depth(self.disparity)
 
-    def points(self, calib, which="object"):
+    def points(self, calib, which="object", min_confidence=0.0):
         """3-D points (float32 ``(N, 3)``, left camera frame: x right, y down, z forward)
         of ``which`` pixels (:func:`lss_kernels.cloud.select`: ``"object"``, ``"all"`` seen
-        by both cameras, ``"background"``), in row-major pixel order; pixels at infinite
-        depth give none."""
+        by both cameras, ``"background"``) whose :attr:`confidence` is at least
+        ``min_confidence``, in row-major pixel order; pixels at infinite depth give none."""
         from .cloud import select
-        return calib.points(self.disparity, select(which, self.foreground, self.occlusion))[0]
+        mask = select(which, self.foreground, self.occlusion, self.confidence, min_confidence)
+        return calib.points(self.disparity, mask)[0]

@@ -111,6 +111,35 @@ def test_selections_and_the_cloud_round_trip_through_plyfile(tmp_path):
     np.testing.assert_allclose(back["xyz"][back["layer"] == 0, 2], 20.0)
 
 
+def test_points_carry_their_confidence_and_min_confidence_keeps_the_sure_ones(tmp_path):
+    H, W = 5, 6
+    fg = np.zeros((H, W), bool)
+    fg[1:4, 2:5] = True
+    occ = np.zeros((H, W), bool)
+    occ[1:4, 0:2] = True
+    conf = np.linspace(0, 1, H * W, dtype=np.float32).reshape(H, W)
+    conf[occ] = 0
+    # min_confidence leaves out the pixels below it, whichever the selection
+    keep = select("object", fg, occ, conf, 0.5)
+    np.testing.assert_array_equal(keep, fg & ~occ & (conf >= 0.5))
+    np.testing.assert_array_equal(select("all", fg, occ, conf, 0.0), ~occ)
+    for bad in (-0.1, 1.5, True, "0.3"):
+        with pytest.raises(ValueError, match=r"^min_confidence: expected a number in \[0, 1\]"):
+            select("all", fg, occ, conf, bad)
+    with pytest.raises(ValueError, match=r"^confidence: expected an array of shape \(5, 6\)"):
+        select("all", fg, occ, None, 0.2)
+    c = Calibration(focal=50.0, baseline=2.0)
+    d = np.where(fg, 20.0, 5.0).astype(np.float32)
+    image = np.zeros((H, W, 3), np.uint8)
+    points = cloud(c, d, image, fg.astype(np.uint8), select("all", fg, occ), conf)
+    path = write_ply(tmp_path / "cloud.ply", points)
+    names = [p.name for p in PlyData.read(str(path))["vertex"].properties]
+    assert names == ["x", "y", "z", "red", "green", "blue", "layer", "confidence"]
+    np.testing.assert_array_equal(read_ply(path)["confidence"], conf[~occ])
+    with pytest.raises(ValueError, match=r"^confidence: expected an array of shape \(5, 6\)"):
+        cloud(c, d, image, fg.astype(np.uint8), select("all", fg, occ), conf[:2])
+
+
 def test_the_layer_index_is_an_input():
     c = Calibration(focal=50.0, baseline=2.0)
     d = np.full((4, 4), 10.0, np.float32)
@@ -152,8 +181,9 @@ def test_solve_with_a_calibration_writes_depth_and_clouds(easy_solved):
     assert len(obj["xyz"]) == (fg & ~occ).sum() > 0
     assert set(np.unique(obj["layer"])) == {1}
     assert set(np.unique(every["layer"])) == {0, 1}
-    # the object's points, as the pixels' depth
+    # the object's points, as the pixels' depth, with their confidence
     np.testing.assert_allclose(obj["xyz"][:, 2], z[fg & ~occ], rtol=1e-6)
+    np.testing.assert_array_equal(obj["confidence"], read_pfm(out / "confidence.pfm")[fg & ~occ])
     summary = json.loads((out / "summary.json").read_text())
     assert summary["calibration"]["points"] == {"cloud.ply": len(every["xyz"]),
                                                 "object.ply": len(obj["xyz"])}
@@ -176,6 +206,9 @@ def test_the_result_gives_depth_and_points(ti_arch):
     assert result.confidence.shape == result.disparity.shape
     assert (result.confidence[result.occlusion] == 0).all()
     assert 0 <= result.confidence.min() and result.confidence.max() <= 1
+    sure = result.points(c, which="all", min_confidence=0.5)
+    assert sure.shape == ((~result.occlusion & (result.confidence >= 0.5)).sum(), 3)
+    assert 0 < len(sure) < len(every)
 
 
 def test_solve_with_the_numbers_by_hand(tmp_path, ti_arch):

@@ -19,7 +19,7 @@ and with a calibration (:class:`lss_kernels.calib.Calibration`)::
 
     depth.pfm        left-view depth f B / (d + doffs), the baseline's unit (inf: unknown)
     cloud.ply        every pixel seen by both cameras: x y z, red green blue, layer
-                     (0 background, 1 the object); binary little-endian
+                     (0 background, 1 the object), confidence; binary little-endian
     object.ply       the object's pixels only
 
 The folder is written to a temporary sibling and renamed into place, so a folder that exists
@@ -239,7 +239,7 @@ def _write_metric(folder, result, left, calib):
     counts = {}
     for name, which in (("cloud.ply", "all"), ("object.ply", "object")):
         points = cloud(calib, result.disparity, left, layer,
-                       select(which, result.foreground, result.occlusion))
+                       select(which, result.foreground, result.occlusion), result.confidence)
         write_ply(os.path.join(folder, name), points)
         counts[name] = int(len(points["xyz"]))
     cx, cy = calib.principal_point(result.disparity.shape)
