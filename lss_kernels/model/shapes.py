@@ -32,7 +32,7 @@ NT = 21 + 6 + 1   # upper triangle of U U^T, U d, row count
 TILE = 16         # children per tile side at every level of the reduction
 #: Rows of the whole background, targeting Theta_2, in each tile's local fit
 #: (:meth:`GlobalShapes.fit_local`).
-LOCAL_PRIOR = 256.0
+LOCAL_PRIOR = 64.0
 _PAIRS = [(a, b) for a in range(NB) for b in range(a, NB)]  # upper triangle, row-major
 _EXPONENTS = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)]  # U_i = x^p y^q: (p, q)
 

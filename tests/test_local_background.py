@@ -1,0 +1,137 @@
+"""The local background (Params.local_background, GlobalShapes.fit_local) against a numpy
+reference of its tile systems, and on a background of two surfaces that one quadratic cannot
+follow."""
+import numpy as np
+import pytest
+import taichi as ti
+
+from lss_kernels.kernels.backend import FieldPool
+from lss_kernels.model.quadratic import basis
+from lss_kernels.model.shapes import LOCAL_PRIOR, TILE, GlobalShapes, WeightPlanes
+
+
+@ti.kernel
+def _background(shapes: ti.template(), out: ti.template()):
+    for y, x in out:
+        out[y, x] = shapes.value(1, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+
+
+@ti.kernel
+def _background_of_size(shapes: ti.template(), out: ti.template()):
+    for y, x in out:
+        out[y, x] = shapes.value_of_size(1, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+
+
+def _solve(h, w, wf, wb, target, local):
+    pool = FieldPool()
+    shapes = GlobalShapes(pool, h, w, local=local)
+    fields = [pool.field(ti.f32, (h, w)) for _ in range(5)]
+    pool.finalize()
+    for f, a in zip(fields, (wf, wb, target)):
+        f.from_numpy(a.astype(np.float32))
+    shapes.fit(WeightPlanes(fields[0], fields[1]), fields[2])
+    global_theta = shapes.theta.to_numpy()[1].astype(np.float64)
+    if local:
+        shapes.fit_local()
+    _background(shapes, fields[3])
+    _background_of_size(shapes, fields[4])
+    out = (global_theta, fields[3].to_numpy(), fields[4].to_numpy(),
+           shapes.local_theta.to_numpy() if local else None)
+    pool.destroy()
+    return out
+
+
+def _normalised_basis(h, w):
+    s = max(h, w) / 2.0
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    return basis((x - (w - 1) / 2.0) / s, (y - (h - 1) / 2.0) / s)
+
+
+def _reference_local(h, w, wb, target, global_theta, local):
+    """Each first-level tile's quadratic: the Gaussian-weighted sum of its neighbours' normal
+    equations plus LOCAL_PRIOR rows of the whole background that target Theta_2."""
+    U = _normalised_basis(h, w)
+    wb = wb.astype(np.float32).astype(np.float64)
+    d = target.astype(np.float32).astype(np.float64)
+    rows, columns = -(-h // TILE), -(-w // TILE)
+    A = np.zeros((rows, columns, 6, 6))
+    b = np.zeros((rows, columns, 6))
+    for ty in range(rows):
+        for tx in range(columns):
+            sl = np.s_[ty * TILE:(ty + 1) * TILE, tx * TILE:(tx + 1) * TILE]
+            u, wt = U[sl].reshape(-1, 6), wb[sl].reshape(-1)
+            A[ty, tx] = (u * wt[:, None]).T @ u
+            b[ty, tx] = (u * wt[:, None]).T @ d[sl].reshape(-1)
+    A_g = A.sum((0, 1))
+    prior = A_g * LOCAL_PRIOR / max((wb > 0).sum(), 1)
+    theta = np.zeros((rows, columns, 6))
+    for ty in range(rows):
+        for tx in range(columns):
+            M, r = prior.copy(), prior @ global_theta
+            for dy in range(-local, local + 1):
+                for dx in range(-local, local + 1):
+                    if 0 <= ty + dy < rows and 0 <= tx + dx < columns:
+                        g = np.exp(-(dy * dy + dx * dx) * 2.0 / local ** 2)
+                        M += g * A[ty + dy, tx + dx]
+                        r += g * b[ty + dy, tx + dx]
+            theta[ty, tx] = np.linalg.solve(M, r)
+    return theta
+
+
+def _two_surfaces(h, w, split):
+    """A background at 10 px left of column ``split`` and on a slant right of it, an object
+    block (no background rows) in the middle."""
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    target = np.where(x < split, 10.0, 20.0 + 0.05 * (x - split))
+    wf = np.zeros((h, w))
+    wf[h // 3:2 * h // 3, w // 3:w // 2] = 1.0
+    wb = 1.0 - wf
+    return wf, wb, target
+
+
+def test_local_background_matches_numpy_reference(ti_arch):
+    h, w = 70, 100
+    rng = np.random.default_rng(3)
+    wf, wb, target = _two_surfaces(h, w, 60)
+    wb = wb * rng.uniform(0.5, 1.5, (h, w))
+    theta_g, _, _, local = _solve(h, w, wf, wb, target, 2)
+    ref = _reference_local(h, w, wb, target, theta_g, 2)
+    # compare each tile's quadratic where it is used: over its own tile
+    U = _normalised_basis(h, w)
+    for ty in range(ref.shape[0]):
+        for tx in range(ref.shape[1]):
+            u = U[ty * TILE:(ty + 1) * TILE, tx * TILE:(tx + 1) * TILE].reshape(-1, 6)
+            np.testing.assert_allclose(u @ local[ty, tx], u @ ref[ty, tx], atol=0.05)
+
+
+def test_local_background_follows_two_surfaces(ti_arch):
+    """One quadratic over a step of 10 px leaves pixels several px off on both sides; the
+    local background is within a fraction of a pixel away from the step, and the value the
+    kernels read (value, value_of_size) is the same."""
+    h, w = 96, 160
+    wf, wb, target = _two_surfaces(h, w, 96)
+    _, global_map, _, _ = _solve(h, w, wf, wb, target, 0)
+    _, local_map, local_of_size, _ = _solve(h, w, wf, wb, target, 2)
+    away = (np.abs(np.arange(w) - 96) > 40)[None, :] & (wb > 0)
+    assert np.abs(global_map - target)[away].max() > 2.0
+    assert np.abs(local_map - target)[away].max() < 0.5
+    np.testing.assert_allclose(local_of_size, local_map, atol=1e-3)
+    # under the object the local background stays near its surroundings' surface (10 px)
+    inside = wf > 0
+    assert np.abs(local_map[inside] - 10.0).max() < 1.5
+
+
+def test_local_background_off_is_one_quadratic(ti_arch):
+    """``local=0`` reads Theta_2 itself."""
+    h, w = 40, 56
+    wf, wb, target = _two_surfaces(h, w, 30)
+    theta_g, global_map, _, _ = _solve(h, w, wf, wb, target, 0)
+    np.testing.assert_allclose(global_map, _normalised_basis(h, w) @ theta_g, atol=1e-3)
+
+
+def test_local_background_parameter_is_validated():
+    from lss_kernels import Params
+    with pytest.raises(ValueError, match="local_background"):
+        Params(local_background=-1)
+    with pytest.raises(ValueError, match="local_background"):
+        Params(local_background=2.5)
