@@ -7,7 +7,8 @@ import taichi as ti
 
 from lss_kernels.kernels.backend import FieldPool
 from lss_kernels.model.quadratic import basis
-from lss_kernels.model.shapes import LOCAL_PRIOR, TILE, GlobalShapes, WeightPlanes
+from lss_kernels.model.shapes import (LOCAL_NEAR, LOCAL_PRIOR, TILE, GlobalShapes,
+                                      WeightPlanes)
 
 
 @ti.kernel
@@ -30,12 +31,12 @@ def _solve(h, w, wf, wb, target, local):
     for f, a in zip(fields, (wf, wb, target)):
         f.from_numpy(a.astype(np.float32))
     shapes.fit(WeightPlanes(fields[0], fields[1]), fields[2])
-    global_theta = shapes.theta.to_numpy()[1].astype(np.float64)
+    theta = shapes.theta.to_numpy().astype(np.float64)
     if local:
-        shapes.fit_local()
+        shapes.fit_local(WeightPlanes(fields[0], fields[1]), fields[2])
     _background(shapes, fields[3])
     _background_of_size(shapes, fields[4])
-    out = (global_theta, fields[3].to_numpy(), fields[4].to_numpy(),
+    out = (theta, fields[3].to_numpy(), fields[4].to_numpy(),
            shapes.local_theta.to_numpy() if local else None)
     pool.destroy()
     return out
@@ -47,12 +48,17 @@ def _normalised_basis(h, w):
     return basis((x - (w - 1) / 2.0) / s, (y - (h - 1) / 2.0) / s)
 
 
-def _reference_local(h, w, wb, target, global_theta, local):
+def _reference_local(h, w, wb, target, theta, local):
     """Each first-level tile's quadratic: the Gaussian-weighted sum of its neighbours' normal
-    equations plus LOCAL_PRIOR rows of the whole background that target Theta_2."""
+    equations (of the background rows more than LOCAL_NEAR behind Theta_1) plus LOCAL_PRIOR
+    rows of the whole background that target Theta_2."""
     U = _normalised_basis(h, w)
     wb = wb.astype(np.float32).astype(np.float64)
     d = target.astype(np.float32).astype(np.float64)
+    n_g = max((wb > 0).sum(), 1)
+    A_g = np.einsum("hwa,hw,hwb->ab", U, wb, U)
+    prior = A_g * LOCAL_PRIOR / n_g
+    wb = np.where(d > U @ theta[0] - LOCAL_NEAR, 0.0, wb)
     rows, columns = -(-h // TILE), -(-w // TILE)
     A = np.zeros((rows, columns, 6, 6))
     b = np.zeros((rows, columns, 6))
@@ -62,29 +68,31 @@ def _reference_local(h, w, wb, target, global_theta, local):
             u, wt = U[sl].reshape(-1, 6), wb[sl].reshape(-1)
             A[ty, tx] = (u * wt[:, None]).T @ u
             b[ty, tx] = (u * wt[:, None]).T @ d[sl].reshape(-1)
-    A_g = A.sum((0, 1))
-    prior = A_g * LOCAL_PRIOR / max((wb > 0).sum(), 1)
-    theta = np.zeros((rows, columns, 6))
+    out = np.zeros((rows, columns, 6))
     for ty in range(rows):
         for tx in range(columns):
-            M, r = prior.copy(), prior @ global_theta
+            M, r = prior.copy(), prior @ theta[1]
             for dy in range(-local, local + 1):
                 for dx in range(-local, local + 1):
                     if 0 <= ty + dy < rows and 0 <= tx + dx < columns:
                         g = np.exp(-(dy * dy + dx * dx) * 2.0 / local ** 2)
                         M += g * A[ty + dy, tx + dx]
                         r += g * b[ty + dy, tx + dx]
-            theta[ty, tx] = np.linalg.solve(M, r)
-    return theta
+            out[ty, tx] = np.linalg.solve(M, r)
+    return out
 
 
-def _two_surfaces(h, w, split):
+def _two_surfaces(h, w, split, rod=False):
     """A background at 10 px left of column ``split`` and on a slant right of it, an object
-    block (no background rows) in the middle."""
+    at 30 px in the middle (no background rows); with ``rod``, a vertical rod at 40 px in
+    front of it, outside the object, among the background's rows."""
     y, x = np.mgrid[0:h, 0:w].astype(np.float64)
     target = np.where(x < split, 10.0, 20.0 + 0.05 * (x - split))
     wf = np.zeros((h, w))
     wf[h // 3:2 * h // 3, w // 3:w // 2] = 1.0
+    target[wf > 0] = 30.0
+    if rod:
+        target[:, w // 4:w // 4 + 4] = 40.0
     wb = 1.0 - wf
     return wf, wb, target
 
@@ -92,10 +100,10 @@ def _two_surfaces(h, w, split):
 def test_local_background_matches_numpy_reference(ti_arch):
     h, w = 70, 100
     rng = np.random.default_rng(3)
-    wf, wb, target = _two_surfaces(h, w, 60)
+    wf, wb, target = _two_surfaces(h, w, 60, rod=True)
     wb = wb * rng.uniform(0.5, 1.5, (h, w))
-    theta_g, _, _, local = _solve(h, w, wf, wb, target, 2)
-    ref = _reference_local(h, w, wb, target, theta_g, 2)
+    theta, _, _, local = _solve(h, w, wf, wb, target, 2)
+    ref = _reference_local(h, w, wb, target, theta, 2)
     # compare each tile's quadratic where it is used: over its own tile
     U = _normalised_basis(h, w)
     for ty in range(ref.shape[0]):
@@ -121,12 +129,25 @@ def test_local_background_follows_two_surfaces(ti_arch):
     assert np.abs(local_map[inside] - 10.0).max() < 1.5
 
 
+def test_local_background_leaves_out_what_stands_in_front(ti_arch):
+    """A rod in front of the object among the background's rows moves the one quadratic;
+    the local fits leave it out, and the background beside it stays at 10 px."""
+    h, w = 96, 160
+    wf, wb, target = _two_surfaces(h, w, 96, rod=True)
+    _, local_map, _, _ = _solve(h, w, wf, wb, target, 2)
+    beside = np.zeros((h, w), bool)
+    beside[:, w // 4 - 12:w // 4 - 2] = True
+    beside[:, w // 4 + 6:w // 4 + 16] = True
+    beside &= wb > 0
+    assert np.abs(local_map - 10.0)[beside].max() < 0.5
+
+
 def test_local_background_off_is_one_quadratic(ti_arch):
     """``local=0`` reads Theta_2 itself."""
     h, w = 40, 56
     wf, wb, target = _two_surfaces(h, w, 30)
-    theta_g, global_map, _, _ = _solve(h, w, wf, wb, target, 0)
-    np.testing.assert_allclose(global_map, _normalised_basis(h, w) @ theta_g, atol=1e-3)
+    theta, global_map, _, _ = _solve(h, w, wf, wb, target, 0)
+    np.testing.assert_allclose(global_map, _normalised_basis(h, w) @ theta[1], atol=1e-3)
 
 
 def test_local_background_parameter_is_validated():

@@ -33,6 +33,9 @@ TILE = 16         # children per tile side at every level of the reduction
 #: Rows of the whole background, targeting Theta_2, in each tile's local fit
 #: (:meth:`GlobalShapes.fit_local`).
 LOCAL_PRIOR = 64.0
+#: A background row whose target lies within this of Theta_1 (cyclopean pixels), or in
+#: front of it, is left out of the local fits.
+LOCAL_NEAR = 1.5
 _PAIRS = [(a, b) for a in range(NB) for b in range(a, NB)]  # upper triangle, row-major
 _EXPONENTS = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)]  # U_i = x^p y^q: (p, q)
 
@@ -117,6 +120,8 @@ class GlobalShapes:
         if self.local:
             # Theta_2 of every first-level tile, and whether it holds a fit (see set)
             self.local_theta = field(ti.f32, self.tiles[0].shape[:2] + (NB,))
+            self.local_tiles = field(ti.f32, self.tiles[0].shape)
+            self._behind = {}
             self.local_ready = field(ti.i32, ())
         pool.on_load(self.load)
 
@@ -354,16 +359,27 @@ class GlobalShapes:
                     self.theta[j, a] = sol[a]
             self.updated[j] = ok
 
+    def fit_local(self, weights, target):
+        """The local background (:meth:`_fit_local`) from Eq. 8's rows ``weights`` of
+        ``target``."""
+        key = (id(weights), id(target))
+        if key not in self._behind:     # one template argument per pair: one compile
+            self._behind[key] = _Behind(weights, self, target)
+        self._fit_local(self._behind[key], target)
+
     @ti.kernel
-    def fit_local(self):
+    def _fit_local(self, behind: ti.template(), target: ti.template()):
         """The local background: for every first-level tile, Eq. 8's weighted least squares
-        of the background over the tiles within ``local`` tiles of it (weighted by a Gaussian
-        of sigma ``local / 2`` tiles), plus ``LOCAL_PRIOR`` rows of the whole background
-        whose targets are Theta_2 itself (the global system ``A_2 / n_2`` times Theta_2):
-        where a tile's neighbourhood holds a background of its own, its quadratic follows
-        it (a shelf, a neighbour a few pixels behind the object), where it holds little
-        (under the object) it stays Theta_2.  Reads the tiles of the last :meth:`fit`; a
-        singular system keeps Theta_2."""
+        of the background (the rows of ``weights`` whose ``target`` lies more than
+        ``LOCAL_NEAR`` behind Theta_1: what stands in front of the object or on its surface
+        is not its background) over the tiles within ``local`` tiles of it, weighted by a
+        Gaussian of sigma ``local / 2`` tiles, plus ``LOCAL_PRIOR`` rows of the whole
+        background whose targets are Theta_2 itself (the root's system ``A_2 / n_2`` times
+        Theta_2).  Where a tile's neighbourhood holds a background of its own, its quadratic
+        follows it (a shelf, a neighbour a few pixels behind the object); where it holds
+        little (under the object), it stays near Theta_2.  Reads the root of the last
+        :meth:`fit`; a singular system keeps Theta_2."""
+        self._from_pixels(behind, target, self.local_tiles)
         height, width = self.extent.height(), self.extent.width()
         rows, columns = self._tiles_of(height, 0), self._tiles_of(width, 0)
         top = ti.static(self.tiles[-1])
@@ -382,7 +398,7 @@ class GlobalShapes:
                 x = tx + dx
                 if 0 <= y < rows and 0 <= x < columns:
                     g = ti.exp(-(dy * dy + dx * dx) * inv_two_var)
-                    A_t, rhs_t = self._system(self.tiles[0], y, x, 1)
+                    A_t, rhs_t = self._system(self.local_tiles, y, x, 1)
                     A += g * A_t
                     rhs += g * rhs_t
             sol, ok = self._solve(A, rhs, 1)
@@ -418,7 +434,7 @@ class GlobalShapes:
         self.fit(w, w.consensus)
         plane = self.sweep.run(iteration, params, cost, self, w.phi, w.phi_plus, w.consensus)
         if self.local:
-            self.fit_local()
+            self.fit_local(w, w.consensus)
         return plane
 
     def set(self, theta_fg, theta_bg):
@@ -432,6 +448,23 @@ class GlobalShapes:
         """``(2, 6)`` coefficients over raw cyclopean pixel coordinates."""
         th = self.extent.pool.read(self.theta)
         return np.stack([to_pixel_coefficients(t, self.H, self.W, scale) for t in th])
+
+
+@ti.data_oriented
+class _Behind:
+    """``weights``' rows with the background's set to 0 where ``target`` lies within
+    ``LOCAL_NEAR`` of Theta_1 or in front of it (:meth:`GlobalShapes.fit_local`)."""
+
+    def __init__(self, weights, shapes, target):
+        self.weights, self.shapes, self.target = weights, shapes, target
+
+    @ti.func
+    def row_weights(self, y, x):
+        w = self.weights.row_weights(y, x)
+        front = self.shapes.value(0, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+        if self.target[y, x] > front - LOCAL_NEAR:
+            w[1] = 0.0
+        return w
 
 
 @ti.data_oriented
