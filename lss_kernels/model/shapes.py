@@ -19,6 +19,7 @@ import numpy as np
 import taichi as ti
 
 from ..kernels.curves import quadratic
+from ..params import PHI_SCALE
 
 __all__ = ["GlobalShapes", "RegionWeights", "WEIGHT_POWER", "WeightPlanes",
            "to_pixel_coefficients"]
@@ -36,6 +37,10 @@ LOCAL_PRIOR = 64.0
 #: A background row whose target lies within this of Theta_1 (cyclopean pixels), or in
 #: front of it, is left out of the local fits.
 LOCAL_NEAR = 1.5
+#: Background rows closer than this to the boundary (pixels of phi) are left out of the
+#: local fits: the pixels that the boundary may yet take or give up are not the evidence of
+#: the background around the object.
+LOCAL_GAP = 10.5
 _PAIRS = [(a, b) for a in range(NB) for b in range(a, NB)]  # upper triangle, row-major
 _EXPONENTS = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)]  # U_i = x^p y^q: (p, q)
 
@@ -457,12 +462,13 @@ class _Behind:
 
     def __init__(self, weights, shapes, target):
         self.weights, self.shapes, self.target = weights, shapes, target
+        self.phi = weights.phi
 
     @ti.func
     def row_weights(self, y, x):
         w = self.weights.row_weights(y, x)
         front = self.shapes.value(0, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
-        if self.target[y, x] > front - LOCAL_NEAR:
+        if self.target[y, x] > front - LOCAL_NEAR or self.phi[y, x] > -LOCAL_GAP * PHI_SCALE:
             w[1] = 0.0
         return w
 
