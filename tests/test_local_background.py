@@ -7,8 +7,9 @@ import taichi as ti
 
 from lss_kernels.kernels.backend import FieldPool
 from lss_kernels.model.quadratic import basis
-from lss_kernels.model.shapes import (LOCAL_NEAR, LOCAL_PRIOR, TILE, GlobalShapes,
-                                      WeightPlanes)
+from lss_kernels.model.shapes import (LOCAL_GAP, LOCAL_NEAR, LOCAL_PRIOR, TILE,
+                                      GlobalShapes, WeightPlanes)
+from lss_kernels.params import PHI_SCALE
 
 
 @ti.kernel
@@ -23,17 +24,39 @@ def _background_of_size(shapes: ti.template(), out: ti.template()):
         out[y, x] = shapes.value_of_size(1, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
 
 
+@ti.data_oriented
+class _Rows(WeightPlanes):
+    """Row weights with the level set's phi, as the solver's RegionWeights have it."""
+
+    def __init__(self, weight_fg, weight_bg, phi):
+        super().__init__(weight_fg, weight_bg)
+        self.phi = phi
+
+
+def _phi(wf):
+    """phi of the object ``wf > 0``: PHI_SCALE times the chessboard distance to it, negative
+    outside (enough for the rows the local fits leave out)."""
+    h, w = wf.shape
+    ys, xs = np.nonzero(wf > 0)
+    y, x = np.mgrid[0:h, 0:w]
+    dy = np.maximum(np.maximum(ys.min() - y, y - ys.max()), 0)
+    dx = np.maximum(np.maximum(xs.min() - x, x - xs.max()), 0)
+    return np.where(wf > 0, 1.0, -np.maximum(dy, dx)) * PHI_SCALE
+
+
 def _solve(h, w, wf, wb, target, local):
     pool = FieldPool()
     shapes = GlobalShapes(pool, h, w, local=local)
-    fields = [pool.field(ti.f32, (h, w)) for _ in range(5)]
+    fields = [pool.field(ti.f32, (h, w)) for _ in range(6)]
     pool.finalize()
     for f, a in zip(fields, (wf, wb, target)):
         f.from_numpy(a.astype(np.float32))
-    shapes.fit(WeightPlanes(fields[0], fields[1]), fields[2])
+    fields[5].from_numpy(_phi(wf).astype(np.float32))
+    rows = _Rows(fields[0], fields[1], fields[5])
+    shapes.fit(rows, fields[2])
     theta = shapes.theta.to_numpy().astype(np.float64)
     if local:
-        shapes.fit_local(WeightPlanes(fields[0], fields[1]), fields[2])
+        shapes.fit_local(rows, fields[2])
     _background(shapes, fields[3])
     _background_of_size(shapes, fields[4])
     out = (theta, fields[3].to_numpy(), fields[4].to_numpy(),
@@ -48,10 +71,11 @@ def _normalised_basis(h, w):
     return basis((x - (w - 1) / 2.0) / s, (y - (h - 1) / 2.0) / s)
 
 
-def _reference_local(h, w, wb, target, theta, local):
+def _reference_local(h, w, wf, wb, target, theta, local):
     """Each first-level tile's quadratic: the Gaussian-weighted sum of its neighbours' normal
-    equations (of the background rows more than LOCAL_NEAR behind Theta_1) plus LOCAL_PRIOR
-    rows of the whole background that target Theta_2."""
+    equations (of the background rows more than LOCAL_NEAR behind Theta_1 and more than
+    LOCAL_GAP px from the boundary) plus LOCAL_PRIOR rows of the whole background that
+    target Theta_2."""
     U = _normalised_basis(h, w)
     wb = wb.astype(np.float32).astype(np.float64)
     d = target.astype(np.float32).astype(np.float64)
@@ -59,6 +83,7 @@ def _reference_local(h, w, wb, target, theta, local):
     A_g = np.einsum("hwa,hw,hwb->ab", U, wb, U)
     prior = A_g * LOCAL_PRIOR / n_g
     wb = np.where(d > U @ theta[0] - LOCAL_NEAR, 0.0, wb)
+    wb = np.where(_phi(wf).astype(np.float32) > -LOCAL_GAP * PHI_SCALE, 0.0, wb)
     rows, columns = -(-h // TILE), -(-w // TILE)
     A = np.zeros((rows, columns, 6, 6))
     b = np.zeros((rows, columns, 6))
@@ -103,7 +128,7 @@ def test_local_background_matches_numpy_reference(ti_arch):
     wf, wb, target = _two_surfaces(h, w, 60, rod=True)
     wb = wb * rng.uniform(0.5, 1.5, (h, w))
     theta, _, _, local = _solve(h, w, wf, wb, target, 2)
-    ref = _reference_local(h, w, wb, target, theta, 2)
+    ref = _reference_local(h, w, wf, wb, target, theta, 2)
     # compare each tile's quadratic where it is used: over its own tile
     U = _normalised_basis(h, w)
     for ty in range(ref.shape[0]):
@@ -156,3 +181,19 @@ def test_local_background_parameter_is_validated():
         Params(local_background=-1)
     with pytest.raises(ValueError, match="local_background"):
         Params(local_background=2.5)
+
+
+def test_local_background_leaves_out_the_rows_near_the_boundary(ti_arch):
+    """Rows that the boundary has just given up (a ring around the object, between its depth
+    and the background's) are no evidence of the background: within LOCAL_GAP px of the
+    boundary they leave the local fits: the local background there is the one without the
+    ring, but for the global fit's pull (the prior)."""
+    h, w = 96, 160
+    wf, wb, target = _two_surfaces(h, w, 120)
+    ring = (np.abs(_phi(wf)) <= 3 * PHI_SCALE) & (wf == 0)
+    _, without, _, _ = _solve(h, w, wf, wb, target, 2)
+    target[ring] = 22.0
+    global_theta, with_ring, _, _ = _solve(h, w, wf, wb, target, 2)
+    _, global_map, _, _ = _solve(h, w, wf, wb, target, 0)
+    assert np.abs(global_map - without)[ring].max() > 0.5      # the one quadratic moves
+    assert np.abs(with_ring - without)[ring].max() < 0.2

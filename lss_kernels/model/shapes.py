@@ -458,18 +458,23 @@ class GlobalShapes:
 @ti.data_oriented
 class _Behind:
     """``weights``' rows with the background's set to 0 where ``target`` lies within
-    ``LOCAL_NEAR`` of Theta_1 or in front of it (:meth:`GlobalShapes.fit_local`)."""
+    ``LOCAL_NEAR`` of Theta_1 or in front of it, and (when ``weights`` has ``phi``) within
+    ``LOCAL_GAP`` pixels of the boundary (:meth:`GlobalShapes.fit_local`)."""
 
     def __init__(self, weights, shapes, target):
         self.weights, self.shapes, self.target = weights, shapes, target
-        self.phi = weights.phi
+        self.phi = getattr(weights, "phi", None)     # the boundary's distance, if known
+        self.with_phi = self.phi is not None
 
     @ti.func
     def row_weights(self, y, x):
         w = self.weights.row_weights(y, x)
         front = self.shapes.value(0, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
-        if self.target[y, x] > front - LOCAL_NEAR or self.phi[y, x] > -LOCAL_GAP * PHI_SCALE:
+        if self.target[y, x] > front - LOCAL_NEAR:
             w[1] = 0.0
+        if ti.static(self.with_phi):
+            if self.phi[y, x] > -LOCAL_GAP * PHI_SCALE:
+                w[1] = 0.0
         return w
 
 
