@@ -170,6 +170,12 @@ class Params:
         the strips they hide, leave both fits and the Eq. 2 data term.  0: the paper's two
         layers.  On the rendered multi-object family it lowers the mean occlusion F1 (see
         ``docs/whole-photo.md``): off by default, also for a whole photo.
+    local_background : int
+        Radius, in tiles of 16 cyclopean pixels, of the local background
+        (:meth:`~lss_kernels.model.shapes.GlobalShapes.fit_local`): Theta_2 read at a pixel
+        is the blend of the quadratics fitted to the background around the nearby tiles,
+        pulled towards the global fit where they hold little background.  0: the paper's
+        one global quadratic.
     """
 
     dt: float = 0.2
@@ -199,6 +205,7 @@ class Params:
     background_sweep: float = 0.05
     refine_ellipse: bool = True
     front_margin: float = 0.0
+    local_background: int = 0
 
     def __post_init__(self):
         self.validate()
@@ -259,6 +266,8 @@ class Params:
         switch("recover")
         switch("photometric")
         need("front_margin", nonneg, "a finite number of pixels >= 0 (0: two layers)")
+        need("local_background", lambda v: isinstance(v, int) and not isinstance(v, bool)
+             and 0 <= v <= 8, "an integer in [0, 8] (0: one global Theta_2)")
 
     @classmethod
     def paper(cls, **changes) -> "Params":

@@ -62,7 +62,8 @@ class Grid:
         weights = RegionWeights(self.extent, h.precision, h.consensus_mean, self.levelset.phi,
                                 self.occ.phi_plus,
                                 None if self.front is None else self.front.hidden)
-        self.shapes = GlobalShapes(pool, H, W, weights, BackgroundSweep(pool, H, W, C))
+        self.shapes = GlobalShapes(pool, H, W, weights, BackgroundSweep(pool, H, W, C),
+                                   p.local_background)
         self.refinement = (LayerRefinement(pool.annex(), H, W, p.refine_passes)
                            if p.refine else None)
         # what the host reads and writes of the pool (FieldPool.host)

@@ -19,6 +19,7 @@ import numpy as np
 import taichi as ti
 
 from ..kernels.curves import quadratic
+from ..params import PHI_SCALE
 
 __all__ = ["GlobalShapes", "RegionWeights", "WEIGHT_POWER", "WeightPlanes",
            "to_pixel_coefficients"]
@@ -30,6 +31,16 @@ WEIGHT_POWER = 2
 NB = 6            # basis size
 NT = 21 + 6 + 1   # upper triangle of U U^T, U d, row count
 TILE = 16         # children per tile side at every level of the reduction
+#: Rows of the whole background, targeting Theta_2, in each tile's local fit
+#: (:meth:`GlobalShapes.fit_local`).
+LOCAL_PRIOR = 64.0
+#: A background row whose target lies within this of Theta_1 (cyclopean pixels), or in
+#: front of it, is left out of the local fits.
+LOCAL_NEAR = 1.5
+#: Background rows closer than this to the boundary (pixels of phi) are left out of the
+#: local fits: the pixels that the boundary may yet take or give up are not the evidence of
+#: the background around the object.
+LOCAL_GAP = 10.5
 _PAIRS = [(a, b) for a in range(NB) for b in range(a, NB)]  # upper triangle, row-major
 _EXPONENTS = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)]  # U_i = x^p y^q: (p, q)
 
@@ -37,6 +48,13 @@ _EXPONENTS = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)]  # U_i = x^p y^q: 
 def _monomial(a, b):
     """(p, q) of U_a U_b = x^p y^q."""
     return _EXPONENTS[a][0] + _EXPONENTS[b][0], _EXPONENTS[a][1] + _EXPONENTS[b][1]
+
+
+def _lanes(value):
+    """The number of lanes of a vector expression, 0 for a scalar (compile time)."""
+    if isinstance(value, ti.Matrix) or (hasattr(value, "ptr") and value.ptr.is_tensor()):
+        return value.n
+    return 0
 
 
 def to_pixel_coefficients(theta, height, width, scale=1.0):
@@ -74,11 +92,15 @@ class GlobalShapes:
     sweep : BackgroundSweep, optional
         The background's plane sweep that :meth:`update` runs after the fit (for
         :meth:`update`).
+    local : int, optional
+        Radius, in tiles of ``TILE`` pixels, of the local background (:meth:`fit_local`);
+        0 (the default): Theta_2 is the one global quadratic of the paper.
     """
 
-    def __init__(self, pool, height, width, weights=None, sweep=None):
+    def __init__(self, pool, height, width, weights=None, sweep=None, local=0):
         self.H, self.W = int(height), int(width)
         self.weights, self.sweep = weights, sweep
+        self.local = int(local)
         self.extent = pool.extent(self.H, self.W)
         self.cx, self.cy = (self.W - 1) / 2.0, (self.H - 1) / 2.0
         self.inv_s = 1.0 / (max(self.H, self.W) / 2.0)
@@ -100,6 +122,12 @@ class GlobalShapes:
             self.tiles.append(field(ti.f32, (h, w, 2, NT)))
             if h == 1 and w == 1:
                 break
+        if self.local:
+            # Theta_2 of every first-level tile, and whether it holds a fit (see set)
+            self.local_theta = field(ti.f32, self.tiles[0].shape[:2] + (NB,))
+            self.local_tiles = field(ti.f32, self.tiles[0].shape)
+            self._behind = {}
+            self.local_ready = field(ti.i32, ())
         pool.on_load(self.load)
 
     def load(self):
@@ -128,13 +156,59 @@ class GlobalShapes:
         it."""
         xn = (x - self.cx) * self.inv_s
         yn = (y - self.cy) * self.inv_s
-        return quadratic(self._coefficients(j), xn, yn)
+        v = quadratic(self._coefficients(j), xn, yn)
+        if ti.static(self.local):
+            if j == 1 and self.local_ready[None] == 1:
+                v = self._blend(x, y, xn, yn)
+        return v
 
     @ti.func
     def value(self, j, x, y):
-        """Theta_j at real cyclopean pixel coordinates (x, y)."""
+        """Theta_j at real cyclopean pixel coordinates (x, y); with a local background
+        (:meth:`fit_local`), Theta_2 is its blend of the tiles' quadratics."""
         xn, yn = self.normalised(x, y)
-        return quadratic(self._coefficients(j), xn, yn)
+        v = quadratic(self._coefficients(j), xn, yn)
+        if ti.static(self.local):
+            if j == 1 and self.local_ready[None] == 1:
+                v = self._blend(x, y, xn, yn)
+        return v
+
+    @ti.func
+    def _blend(self, x, y, xn, yn):
+        """:meth:`_blend_at` at a point, or lane by lane at a vector of columns ``x`` (a
+        vector ``xn``) on row ``y``."""
+        v = xn
+        if ti.static(_lanes(xn)):
+            v = ti.Vector([self._blend_at(x[i], y, xn[i], yn)
+                           for i in ti.static(range(_lanes(xn)))])
+        else:
+            v = self._blend_at(x, y, xn, yn)
+        return v
+
+    @ti.func
+    def _blend_at(self, x, y, xn, yn):
+        """The local background at (x, y): the quadratics of the four tiles whose centres
+        surround the point, each evaluated there, weighted bilinearly (constant beyond the
+        outermost centres)."""
+        columns = self._tiles_of(self.extent.width(), 0)
+        rows = self._tiles_of(self.extent.height(), 0)
+        u = ti.min(ti.max(x / TILE - 0.5, 0.0), columns - 1.0)
+        v = ti.min(ti.max(y / TILE - 0.5, 0.0), rows - 1.0)
+        u0 = ti.min(ti.cast(ti.floor(u), ti.i32), columns - 1)
+        v0 = ti.min(ti.cast(ti.floor(v), ti.i32), rows - 1)
+        u1 = ti.min(u0 + 1, columns - 1)
+        v1 = ti.min(v0 + 1, rows - 1)
+        fu = u - u0
+        fv = v - v0
+        top = (1.0 - fu) * self._tile_value(v0, u0, xn, yn) + fu * self._tile_value(v0, u1, xn, yn)
+        bottom = ((1.0 - fu) * self._tile_value(v1, u0, xn, yn)
+                  + fu * self._tile_value(v1, u1, xn, yn))
+        return (1.0 - fv) * top + fv * bottom
+
+    @ti.func
+    def _tile_value(self, ty, tx, xn, yn):
+        return quadratic(ti.Vector([self.local_theta[ty, tx, a] for a in ti.static(range(NB))]),
+                         xn, yn)
 
     @ti.func
     def _coefficients(self, j):
@@ -229,52 +303,115 @@ class GlobalShapes:
                 out[ty, tx, j, n] = s
 
     @ti.func
+    def _system(self, src: ti.template(), ty, tx, j):
+        """The normal equations ``(A, rhs)`` of region ``j`` held in ``src[ty, tx, j]``."""
+        A = ti.Matrix.zero(ti.f32, NB, NB)
+        rhs = ti.Vector.zero(ti.f32, NB)
+        for n in ti.static(range(len(_PAIRS))):
+            A[_PAIRS[n][0], _PAIRS[n][1]] = src[ty, tx, j, n]
+            A[_PAIRS[n][1], _PAIRS[n][0]] = src[ty, tx, j, n]
+        for a in ti.static(range(NB)):
+            rhs[a] = src[ty, tx, j, 21 + a]
+        return A, rhs
+
+    @ti.func
+    def _solve(self, A, rhs, ok):
+        """Solve ``A theta = rhs`` (6x6) by Gaussian elimination with partial pivoting
+        (unrolled: indices are static); ``ok`` comes in as 1 when the system has enough
+        rows and goes out 0 when it is singular.  Returns ``(theta, ok)``."""
+        scale = 0.0
+        for a in ti.static(range(NB)):
+            scale = ti.max(scale, ti.abs(A[a, a]))
+        for col in ti.static(range(NB)):
+            piv = col
+            best = ti.abs(A[col, col])
+            for r in ti.static(range(col + 1, NB)):
+                if ti.abs(A[r, col]) > best:
+                    best = ti.abs(A[r, col])
+                    piv = r
+            if best <= 1e-7 * scale or scale <= 0:
+                ok = 0
+            for r in ti.static(range(col + 1, NB)):
+                if piv == r:
+                    for cc in ti.static(range(NB)):
+                        A[col, cc], A[r, cc] = A[r, cc], A[col, cc]
+                    rhs[col], rhs[r] = rhs[r], rhs[col]
+            if ok == 1:
+                for r in ti.static(range(col + 1, NB)):
+                    f = A[r, col] / A[col, col]
+                    for cc in ti.static(range(col, NB)):
+                        A[r, cc] -= f * A[col, cc]
+                    rhs[r] -= f * rhs[col]
+        sol = ti.Vector.zero(ti.f32, NB)
+        if ok == 1:
+            for i in ti.static(range(NB - 1, -1, -1)):
+                s = rhs[i]
+                for cc in ti.static(range(i + 1, NB)):
+                    s -= A[i, cc] * sol[cc]
+                sol[i] = s / A[i, i]
+        return sol, ok
+
+    @ti.func
     def _solve_root(self, root: ti.template()):
         ti.loop_config(serialize=True)
         for j in range(2):
-            A = ti.Matrix.zero(ti.f32, NB, NB)
-            rhs = ti.Vector.zero(ti.f32, NB)
-            for n in ti.static(range(len(_PAIRS))):
-                A[_PAIRS[n][0], _PAIRS[n][1]] = root[0, 0, j, n]
-                A[_PAIRS[n][1], _PAIRS[n][0]] = root[0, 0, j, n]
-            for a in ti.static(range(NB)):
-                rhs[a] = root[0, 0, j, 21 + a]
+            A, rhs = self._system(root, 0, 0, j)
             self.rows[j] = root[0, 0, j, 27]
             ok = 1 if root[0, 0, j, 27] >= NB else 0
-            scale = 0.0
-            for a in ti.static(range(NB)):
-                scale = ti.max(scale, ti.abs(A[a, a]))
-            # Gaussian elimination with partial pivoting (unrolled: indices are static)
-            for col in ti.static(range(NB)):
-                piv = col
-                best = ti.abs(A[col, col])
-                for r in ti.static(range(col + 1, NB)):
-                    if ti.abs(A[r, col]) > best:
-                        best = ti.abs(A[r, col])
-                        piv = r
-                if best <= 1e-7 * scale or scale <= 0:
-                    ok = 0
-                for r in ti.static(range(col + 1, NB)):
-                    if piv == r:
-                        for cc in ti.static(range(NB)):
-                            A[col, cc], A[r, cc] = A[r, cc], A[col, cc]
-                        rhs[col], rhs[r] = rhs[r], rhs[col]
-                if ok == 1:
-                    for r in ti.static(range(col + 1, NB)):
-                        f = A[r, col] / A[col, col]
-                        for cc in ti.static(range(col, NB)):
-                            A[r, cc] -= f * A[col, cc]
-                        rhs[r] -= f * rhs[col]
+            sol, ok = self._solve(A, rhs, ok)
             if ok == 1:
-                sol = ti.Vector.zero(ti.f32, NB)
-                for i in ti.static(range(NB - 1, -1, -1)):
-                    s = rhs[i]
-                    for cc in ti.static(range(i + 1, NB)):
-                        s -= A[i, cc] * sol[cc]
-                    sol[i] = s / A[i, i]
                 for a in ti.static(range(NB)):
                     self.theta[j, a] = sol[a]
             self.updated[j] = ok
+
+    def fit_local(self, weights, target):
+        """The local background (:meth:`_fit_local`) from Eq. 8's rows ``weights`` of
+        ``target``."""
+        key = (id(weights), id(target))
+        if key not in self._behind:     # one template argument per pair: one compile
+            self._behind[key] = _Behind(weights, self, target)
+        self._fit_local(self._behind[key], target)
+
+    @ti.kernel
+    def _fit_local(self, behind: ti.template(), target: ti.template()):
+        """The local background: for every first-level tile, Eq. 8's weighted least squares
+        of the background (the rows of ``weights`` whose ``target`` lies more than
+        ``LOCAL_NEAR`` behind Theta_1: what stands in front of the object or on its surface
+        is not its background) over the tiles within ``local`` tiles of it, weighted by a
+        Gaussian of sigma ``local / 2`` tiles, plus ``LOCAL_PRIOR`` rows of the whole
+        background whose targets are Theta_2 itself (the root's system ``A_2 / n_2`` times
+        Theta_2).  Where a tile's neighbourhood holds a background of its own, its quadratic
+        follows it (a shelf, a neighbour a few pixels behind the object); where it holds
+        little (under the object), it stays near Theta_2.  Reads the root of the last
+        :meth:`fit`; a singular system keeps Theta_2."""
+        self._from_pixels(behind, target, self.local_tiles)
+        height, width = self.extent.height(), self.extent.width()
+        rows, columns = self._tiles_of(height, 0), self._tiles_of(width, 0)
+        top = ti.static(self.tiles[-1])
+        A_g, _ = self._system(top, 0, 0, 1)
+        n_g = ti.max(top[0, 0, 1, 27], 1.0)
+        theta_g = self._coefficients(1)
+        prior = A_g * (LOCAL_PRIOR / n_g)
+        prior_rhs = prior @ theta_g
+        R = ti.static(self.local)
+        inv_two_var = 2.0 / (R * R)            # 1 / (2 sigma^2) with sigma = R / 2
+        for ty, tx in ti.ndrange(rows, columns):
+            A = prior
+            rhs = prior_rhs
+            for dy, dx in ti.static(ti.ndrange((-R, R + 1), (-R, R + 1))):
+                y = ty + dy
+                x = tx + dx
+                if 0 <= y < rows and 0 <= x < columns:
+                    g = ti.exp(-(dy * dy + dx * dx) * inv_two_var)
+                    A_t, rhs_t = self._system(self.local_tiles, y, x, 1)
+                    A += g * A_t
+                    rhs += g * rhs_t
+            sol, ok = self._solve(A, rhs, 1)
+            if ok == 0:
+                sol = theta_g
+            for a in ti.static(range(NB)):
+                self.local_theta[ty, tx, a] = sol[a]
+        self.local_ready[None] = 1
 
     @ti.kernel
     def fit(self, weights: ti.template(), target: ti.template()):
@@ -300,16 +437,45 @@ class GlobalShapes:
         Returns the sweep's plane (cyclopean disparity), or None when Theta_2 is the fit's."""
         w = self.weights
         self.fit(w, w.consensus)
-        return self.sweep.run(iteration, params, cost, self, w.phi, w.phi_plus, w.consensus)
+        plane = self.sweep.run(iteration, params, cost, self, w.phi, w.phi_plus, w.consensus)
+        if self.local:
+            self.fit_local(w, w.consensus)
+        return plane
 
     def set(self, theta_fg, theta_bg):
-        """Set both shapes from normalised-basis coefficients (cyclopean units)."""
+        """Set both shapes from normalised-basis coefficients (cyclopean units); a local
+        background is dropped until the next fit."""
         self.extent.pool.write(self.theta, np.stack([theta_fg, theta_bg]).astype(np.float32))
+        if self.local:
+            self.local_ready.fill(0)
 
     def pixel_coefficients(self, scale=1.0):
         """``(2, 6)`` coefficients over raw cyclopean pixel coordinates."""
         th = self.extent.pool.read(self.theta)
         return np.stack([to_pixel_coefficients(t, self.H, self.W, scale) for t in th])
+
+
+@ti.data_oriented
+class _Behind:
+    """``weights``' rows with the background's set to 0 where ``target`` lies within
+    ``LOCAL_NEAR`` of Theta_1 or in front of it, and (when ``weights`` has ``phi``) within
+    ``LOCAL_GAP`` pixels of the boundary (:meth:`GlobalShapes.fit_local`)."""
+
+    def __init__(self, weights, shapes, target):
+        self.weights, self.shapes, self.target = weights, shapes, target
+        self.phi = getattr(weights, "phi", None)     # the boundary's distance, if known
+        self.with_phi = self.phi is not None
+
+    @ti.func
+    def row_weights(self, y, x):
+        w = self.weights.row_weights(y, x)
+        front = self.shapes.value(0, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
+        if self.target[y, x] > front - LOCAL_NEAR:
+            w[1] = 0.0
+        if ti.static(self.with_phi):
+            if self.phi[y, x] > -LOCAL_GAP * PHI_SCALE:
+                w[1] = 0.0
+        return w
 
 
 @ti.data_oriented
