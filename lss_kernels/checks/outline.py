@@ -1,0 +1,127 @@
+"""The object's outline read row by row from the pair, for each pair of teeth of the two
+layers: the check behind :func:`~lss_kernels.checks.teeth.on_tooth` when the solve's
+outline itself is wrong, not only a tooth off.
+
+On stripes on both layers the alternation can end with the two surfaces on wrong teeth, or
+the background in front of the object, and its outline is then the boundary of whatever
+region those surfaces explain, not the object's (``periodic_diff``, ``periodic_same_mid``
+of ``lss_kernels.stress --periodic``).  Moving that outline (:mod:`.teeth`) cannot repair
+it.  But with Theta_1 and Theta_2 fixed, Eq. (1) along one row, with an object that spans
+one run ``[a, b)`` of it, is a function of ``a`` and ``b`` alone (the scanline problem of
+Belhumeur, cited in Sec. 1): the foreground's matching cost over ``[a, b)``, the
+background's over the rest, and the strip ``[a - Delta theta, a)`` hidden from the right
+camera.  Its exact minimum over ``a <= b`` takes two prefix sums and a running minimum
+(:func:`row_outline`), so the outline of every candidate pair of surfaces costs one pass
+over the image.  The candidates are each layer's plane (fitted to the solved surface over
+its region) moved to the teeth where its region matches best
+(:func:`~lss_kernels.checks.teeth._teeth`), every pair with the object at least
+``MIN_JUMP`` in front; the best pair's outline gives the regions of a second round
+(``ROUNDS``), whose teeth are read from the right pixels.
+"""
+import numpy as np
+
+from .teeth import (HIDDEN_COST, MIN_JUMP, UPSAMPLE, _eroded, _sample, _teeth, plane_of)
+
+__all__ = ["INNER", "OUTER", "ROUNDS", "choose_layers", "pixel_costs", "row_outline"]
+
+#: Rounds of the search: each reads the teeth from the regions of the last round's outline.
+ROUNDS = 2
+#: Erosions (4-neighbour) of the object's region, and of the rest, over which a layer's
+#: teeth are read: a solved outline that is off puts the other layer's texture near it.
+INNER, OUTER = 3, 6
+
+
+def pixel_costs(left, right, disparity):
+    """Per left pixel, the absolute difference (mean over channels) from the right image at
+    ``x - disparity`` (the Eq. 1 matching cost ``M`` of the AD kind), ``HIDDEN_COST`` where
+    that lies outside the right image.  ``left`` ``(H, W, C)``, ``right`` :func:`upsampled
+    <lss_kernels.checks.teeth.upsampled>` by ``UPSAMPLE``, ``disparity`` ``(H, W)``, left
+    view.  Returns ``(H, W)``."""
+    H, W = disparity.shape
+    ys, xs = np.mgrid[0:H, 0:W]
+    r = xs - disparity
+    ok = (r >= 0) & (r <= W - 1)
+    cost = np.full((H, W), HIDDEN_COST)
+    cost[ok] = np.abs(left[ok] - _sample(right, ys[ok], r[ok] * UPSAMPLE)).mean(axis=-1)
+    return cost
+
+
+def row_outline(left, right, front, back):
+    """The object's outline that minimises Eq. (1) for the surfaces ``front`` (Theta_1) and
+    ``back`` (Theta_2), ``(H, W)`` left view, with no length term: in each row the run
+    ``[a, b)`` of object pixels that minimises the foreground's :func:`pixel_costs` over it,
+    plus the background's over the rest, the pixels ``[a - Delta, a)`` (``Delta`` the jump
+    at ``a``, rounded) that the object hides from the right camera counted at
+    ``HIDDEN_COST`` each; the rows that hold the object are the one run of rows whose
+    summed gain over the background alone is largest.  ``left``, ``right`` as in
+    :func:`pixel_costs`.  Returns ``(mask, cost)``: the object (bool ``(H, W)``) and the
+    whole image's cost summed, over ``H W``."""
+    H, W = front.shape
+    fore = pixel_costs(left, right, front)
+    behind = pixel_costs(left, right, back)
+    zero = np.zeros((H, 1))
+    P_back = np.concatenate([zero, np.cumsum(behind, axis=1)], axis=1)
+    P_diff = np.concatenate([zero, np.cumsum(fore - behind, axis=1)], axis=1)
+    cols = np.arange(W + 1)
+    jump = front - back
+    jump = np.concatenate([jump, jump[:, -1:]], axis=1)
+    start = np.clip(cols[None, :] - np.clip(np.rint(jump), 0, None).astype(np.int64), 0, None)
+    # a row's cost less the background's alone: enter(a) + leave(b), a <= b
+    enter = (-P_diff - P_back + np.take_along_axis(P_back, start, axis=1)
+             + HIDDEN_COST * (cols[None, :] - start))
+    total = np.minimum.accumulate(enter, axis=1) + P_diff
+    b = total.argmin(axis=1)
+    a = np.where(cols[None, :] <= b[:, None], enter, np.inf).argmin(axis=1)
+    rows = np.arange(H)
+    gain = np.where(b > a, -total[rows, b], 0.0)
+    # the run of rows with the largest summed gain (Kadane)
+    best, run, first, span = 0.0, 0.0, 0, None
+    for y in range(H):
+        if run <= 0.0:
+            run, first = 0.0, y
+        run += gain[y]
+        if run > best:
+            best, span = run, (first, y + 1)
+    mask = np.zeros((H, W), bool)
+    if span is not None:
+        x = np.arange(W)[None, :]
+        y0, y1 = span
+        mask[y0:y1] = (x >= a[y0:y1, None]) & (x < b[y0:y1, None])
+    return mask, float((P_back[:, -1].sum() - best) / (H * W))
+
+
+def _layer(left, right, mask, region, surface, d_max):
+    """The plane fitted to ``surface`` over ``mask`` and the offsets of its teeth over
+    ``region`` (0 among them)."""
+    plane = plane_of(mask, surface)
+    offsets = _teeth(left, right, region, plane, -plane.min(), float(d_max) - plane.max())
+    return plane, sorted({0.0, *offsets})
+
+
+def choose_layers(left, right, foreground, surface, d_max):
+    """The pair of layer teeth, and the outline (:func:`row_outline`), that explain the pair
+    best, as the module text says.  ``left`` ``(H, W, C)``, ``right`` upsampled as in
+    :func:`pixel_costs`; ``foreground`` bool and ``surface`` ``(H, W)``, the solved model
+    (left view).  Returns ``(mask, front, back, cost)``, ``front`` and ``back`` planes on
+    the whole grid; None when no pair has the object in front."""
+    best = None
+    for _ in range(ROUNDS):
+        if not foreground.any() or foreground.all():
+            break
+        front, front_teeth = _layer(left, right, foreground, _eroded(foreground, INNER),
+                                    surface, d_max)
+        back, back_teeth = _layer(left, right, ~foreground, _eroded(~foreground, OUTER),
+                                  surface, d_max)
+        found = None
+        for s in front_teeth:
+            for r in back_teeth:
+                if np.median((front - back)[foreground]) + s - r < MIN_JUMP:
+                    continue
+                mask, cost = row_outline(left, right, front + s, back + r)
+                if found is None or cost < found[3]:
+                    found = (mask, front + s, back + r, cost)
+        if found is None or (best is not None and found[3] >= best[3]):
+            break
+        best = found
+        foreground, surface = found[0], np.where(found[0], found[1], found[2])
+    return best
