@@ -16,13 +16,19 @@ over the image.  The candidates are each layer's plane (fitted to the solved sur
 its region) moved to the teeth where its region matches best
 (:func:`~lss_kernels.checks.teeth._teeth`), every pair with the object at least
 ``MIN_JUMP`` in front; the best pair's outline gives the regions of a second round
-(``ROUNDS``), whose teeth are read from the right pixels.
+(``ROUNDS``), whose teeth are read from the right pixels.  :func:`on_layers` takes the
+best when its warp explains the right image better than the solved model
+(:func:`~lss_kernels.checks.recovery.with_recovery` calls it after each solve of a periodic
+pair, after :func:`~lss_kernels.checks.teeth.on_tooth`).
 """
 import numpy as np
 
-from .teeth import (HIDDEN_COST, MIN_JUMP, UPSAMPLE, _eroded, _sample, _teeth, plane_of)
+from ..params import PHI_SCALE
+from .teeth import (HIDDEN_COST, MIN_GAIN, MIN_JUMP, UPSAMPLE, _coefficients, _eroded, _sample,
+                    _teeth, plane_of, upsampled, warp_cost)
 
-__all__ = ["INNER", "OUTER", "ROUNDS", "choose_layers", "pixel_costs", "row_outline"]
+__all__ = ["INNER", "OUTER", "ROUNDS", "choose_layers", "on_layers", "pixel_costs",
+           "row_outline"]
 
 #: Rounds of the search: each reads the teeth from the regions of the last round's outline.
 ROUNDS = 2
@@ -125,3 +131,67 @@ def choose_layers(left, right, foreground, surface, d_max):
         best = found
         foreground, surface = found[0], np.where(found[0], found[1], found[2])
     return best
+
+
+def on_layers(result, left, right, d_max):
+    """``result`` (a :class:`~lss_kernels.result.Result` of the pair ``left``, ``right``,
+    after :func:`~lss_kernels.checks.teeth.on_tooth`) replaced in place by the layers and
+    outline that :func:`choose_layers` reads from the pair when their warp
+    (:func:`~lss_kernels.checks.teeth.warp_cost`) differs from the right image by
+    ``MIN_GAIN`` less than ``result``'s does: the two planes as the surfaces (the refined
+    disparity kept where a pixel's layer and surface are unchanged, to half a pixel),
+    Theta_1 and Theta_2 the planes in the cyclopean frame, phi ``PHI_SCALE`` times the
+    signed distance along each row to the outline moved to the cyclopean frame, the
+    occlusion of the new surfaces (confidence 0 there).  Returns what was found (None: no pair of teeth with the object in front);
+    ``result`` is changed in place."""
+    from ..model.layers import occlusion_by_layers
+    left = np.asarray(left, np.float64)
+    right = np.asarray(right, np.float64)
+    if left.ndim == 2:
+        left, right = left[..., None], right[..., None]
+    right = upsampled(right)
+    foreground = np.asarray(result.foreground, bool)
+    solved = np.asarray(result.surface, np.float64)
+    found = choose_layers(left, right, foreground, solved, d_max)
+    if found is None:
+        return None
+    mask, front, back, _ = found
+    surface = np.where(mask, front, back)
+    before = warp_cost(left, right, foreground, solved, UPSAMPLE)[0]
+    after = warp_cost(left, right, mask, surface, UPSAMPLE)[0]
+    taken = bool(after < (1.0 - MIN_GAIN) * before and mask.any())
+    info = {"cost_before": before, "cost": after, "taken": taken,
+            "front": float(np.median(front[mask])) if mask.any() else None,
+            "back": float(np.median(back[~mask]))}
+    if not taken:
+        return info
+    same = (mask == foreground) & (np.abs(surface - solved) <= 0.5)
+    clean = lambda d: np.clip(d, 0.0, d_max).astype(np.float32)
+    result.disparity = clean(np.where(same, result.disparity, surface))
+    result.foreground, result.surface = mask, clean(surface)
+    result.occlusion = occlusion_by_layers(result.surface, mask.astype(np.int32))
+    result.confidence = np.where(result.occlusion, 0.0, result.confidence).astype(np.float32)
+    if result.layers is not None:
+        result.layers = mask.astype(np.uint8)
+    for name, plane, region in (("theta_fg", front, mask), ("theta_bg", back, ~mask)):
+        # d = a x_left + b y + c with x_left = x_cyclopean + d / 2
+        a, b, c = _coefficients(plane, region)
+        theta = np.array([0.0, 0.0, 0.0, a, b, c]) / (1.0 - a / 2.0)
+        setattr(result, name, theta.astype(np.asarray(getattr(result, name)).dtype))
+    result.phi = _row_distance(mask, front).astype(np.float32)
+    return info
+
+
+def _row_distance(mask, front):
+    """``PHI_SCALE`` times the signed distance along each row (> 0 inside) to the run of
+    ``mask`` (one a row, left view) moved to the cyclopean frame (``x - front / 2`` at its
+    ends); rows without it at minus the width."""
+    H, W = mask.shape
+    x = np.arange(W, dtype=np.float64)
+    phi = np.full((H, W), -float(W))
+    for y in np.nonzero(mask.any(axis=1))[0]:
+        cols = np.nonzero(mask[y])[0]
+        a = cols[0] - 0.5 - front[y, cols[0]] / 2.0
+        b = cols[-1] + 0.5 - front[y, cols[-1]] / 2.0
+        phi[y] = np.minimum(x - a, b - x)
+    return PHI_SCALE * phi

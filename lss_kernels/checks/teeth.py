@@ -377,15 +377,11 @@ def on_tooth(result, left, right, d_max):
     the background's under the pixels the object left is interpolated along the rows), the
     occlusion of the moved surfaces (:func:`~lss_kernels.model.layers.occlusion_by_layers`;
     confidence 0 there), Theta_1's constant term by ``s`` and phi by ``t - s / 2`` columns
-    (the cyclopean frame); then, on a periodic object, replaced by the layers and outline
-    read row by row from the pair when they explain it better (:func:`_on_layers`).
-    Returns ``(result, info)``; ``result`` is changed in place."""
+    (the cyclopean frame).  Returns ``(result, info)``; ``result`` is changed in place."""
     foreground = np.asarray(result.foreground, bool)
     (s, t, plane), info = choose_tooth(left, right, foreground, result.surface, d_max)
     if not (s == 0.0 and t == 0 and plane is None):
         _moved(result, foreground, s, t, plane, info, d_max)
-    if "period" in info and info["period"] is not None:
-        _on_layers(result, left, right, d_max, info)
     return result, info
 
 
@@ -421,70 +417,6 @@ def _moved(result, foreground, s, t, plane, info, d_max):
         theta[5] += s
     result.theta_fg = theta.astype(np.asarray(result.theta_fg).dtype)
     result.phi = _shifted_rows(np.asarray(result.phi, np.float32), t - info["offset"] / 2.0)
-
-
-def _on_layers(result, left, right, d_max, info):
-    """``result`` replaced in place by the layers and outline that
-    :func:`~lss_kernels.checks.outline.choose_layers` reads from the pair when their warp
-    (:func:`warp_cost`) differs from the right image by ``MIN_GAIN`` less than ``result``'s
-    does: the two planes as the surfaces (the refined disparity kept where a pixel's layer
-    and surface are unchanged, to half a pixel), Theta_1 and Theta_2 the planes in the
-    cyclopean frame, phi ``PHI_SCALE`` times the signed distance along each row to the
-    outline moved to the cyclopean frame, the occlusion of the new surfaces (confidence 0
-    there).  Recorded in ``info["outline"]``."""
-    from ..model.layers import occlusion_by_layers
-    from .outline import choose_layers
-    left = np.asarray(left, np.float64)
-    right = np.asarray(right, np.float64)
-    if left.ndim == 2:
-        left, right = left[..., None], right[..., None]
-    right = upsampled(right)
-    foreground = np.asarray(result.foreground, bool)
-    solved = np.asarray(result.surface, np.float64)
-    found = choose_layers(left, right, foreground, solved, d_max)
-    if found is None:
-        info["outline"] = None
-        return
-    mask, front, back, _ = found
-    surface = np.where(mask, front, back)
-    before = warp_cost(left, right, foreground, solved, UPSAMPLE)[0]
-    after = warp_cost(left, right, mask, surface, UPSAMPLE)[0]
-    taken = bool(after < (1.0 - MIN_GAIN) * before and mask.any())
-    info["outline"] = {"cost_before": before, "cost": after, "taken": taken,
-                       "front": float(np.median(front[mask])) if mask.any() else None,
-                       "back": float(np.median(back[~mask]))}
-    if not taken:
-        return
-    same = (mask == foreground) & (np.abs(surface - solved) <= 0.5)
-    clean = lambda d: np.clip(d, 0.0, d_max).astype(np.float32)
-    result.disparity = clean(np.where(same, result.disparity, surface))
-    result.foreground, result.surface = mask, clean(surface)
-    result.occlusion = occlusion_by_layers(result.surface, mask.astype(np.int32))
-    result.confidence = np.where(result.occlusion, 0.0, result.confidence).astype(np.float32)
-    if result.layers is not None:
-        result.layers = mask.astype(np.uint8)
-    for name, plane, region in (("theta_fg", front, mask), ("theta_bg", back, ~mask)):
-        # d = a x_left + b y + c with x_left = x_cyclopean + d / 2
-        a, b, c = _coefficients(plane, region)
-        theta = np.array([0.0, 0.0, 0.0, a, b, c]) / (1.0 - a / 2.0)
-        setattr(result, name, theta.astype(np.asarray(getattr(result, name)).dtype))
-    result.phi = _row_distance(mask, front).astype(np.float32)
-
-
-def _row_distance(mask, front):
-    """``PHI_SCALE`` times the signed distance along each row (> 0 inside) to the run of
-    ``mask`` (one a row, left view) moved to the cyclopean frame (``x - front / 2`` at its
-    ends); rows without it at minus the width."""
-    from ..params import PHI_SCALE
-    H, W = mask.shape
-    x = np.arange(W, dtype=np.float64)
-    phi = np.full((H, W), -float(W))
-    for y in np.nonzero(mask.any(axis=1))[0]:
-        cols = np.nonzero(mask[y])[0]
-        a = cols[0] - 0.5 - front[y, cols[0]] / 2.0
-        b = cols[-1] + 0.5 - front[y, cols[-1]] / 2.0
-        phi[y] = np.minimum(x - a, b - x)
-    return PHI_SCALE * phi
 
 
 def _behind(foreground, surface, background, period):
