@@ -142,8 +142,8 @@ def on_layers(result, left, right, d_max):
     disparity kept where a pixel's layer and surface are unchanged, to half a pixel),
     Theta_1 and Theta_2 the planes in the cyclopean frame, phi ``PHI_SCALE`` times the
     signed distance along each row to the outline moved to the cyclopean frame, the
-    occlusion of the new surfaces (confidence 0 there).  Returns what was found (None: no pair of teeth with the object in front);
-    ``result`` is changed in place."""
+    occlusion of the new surfaces (confidence 0 there).  Returns what was found (None: no
+    pair of teeth with the object in front); ``result`` is changed in place."""
     from ..model.layers import occlusion_by_layers
     left = np.asarray(left, np.float64)
     right = np.asarray(right, np.float64)
