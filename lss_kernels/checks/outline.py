@@ -1,5 +1,5 @@
 """The object's outline read row by row from the pair, for each pair of teeth of the two
-layers: the check behind :func:`~lss_kernels.checks.teeth.on_tooth` when the solve's
+layers: the check after :func:`~lss_kernels.checks.teeth.on_tooth` for when the solve's
 outline itself is wrong, not only a tooth off.
 
 On stripes on both layers the alternation can end with the two surfaces on wrong teeth, or
