@@ -15,7 +15,9 @@ camera.  Its exact minimum over ``a <= b`` takes two prefix sums and a running m
 over the image.  The candidates are each layer's plane (fitted to the solved surface over
 its region) moved to the teeth where its region matches best
 (:func:`~lss_kernels.checks.teeth._teeth`), every pair with the object at least
-``MIN_JUMP`` in front; the best pair's outline gives the regions of a second round
+``MIN_JUMP`` in front, with the object within ``REACH`` pixels of the solved object's box
+(a whole photo's other objects can be explained by the same planes); the best pair's
+outline gives the regions of a second round
 (``ROUNDS``), whose teeth are read from the right pixels.  :func:`on_layers` takes the
 best when its warp explains the right image better than the solved model
 (:func:`~lss_kernels.checks.recovery.with_recovery` calls it after each solve of a periodic
@@ -27,11 +29,15 @@ from ..params import PHI_SCALE
 from .teeth import (HIDDEN_COST, MIN_GAIN, MIN_JUMP, UPSAMPLE, _coefficients, _eroded, _sample,
                     _teeth, plane_of, upsampled, warp_cost)
 
-__all__ = ["INNER", "OUTER", "ROUNDS", "choose_layers", "on_layers", "pixel_costs",
+__all__ = ["INNER", "OUTER", "REACH", "ROUNDS", "choose_layers", "on_layers", "pixel_costs",
            "row_outline"]
 
 #: Rounds of the search: each reads the teeth from the regions of the last round's outline.
 ROUNDS = 2
+#: The outline is searched within this many pixels of the solved object's bounding box: the
+#: solve puts the object near where it is, and a row's run of object pixels must not spread
+#: over other objects of a whole photo that the two planes happen to explain.
+REACH = 32
 #: Erosions (4-neighbour) of the object's region, and of the rest, over which a layer's
 #: teeth are read: a solved outline that is off puts the other layer's texture near it.
 INNER, OUTER = 3, 6
@@ -52,7 +58,7 @@ def pixel_costs(left, right, disparity):
     return cost
 
 
-def row_outline(left, right, front, back):
+def row_outline(left, right, front, back, allowed=None):
     """The object's outline that minimises Eq. (1) for the surfaces ``front`` (Theta_1) and
     ``back`` (Theta_2), ``(H, W)`` left view, with no length term: in each row the run
     ``[a, b)`` of object pixels that minimises the foreground's :func:`pixel_costs` over it,
@@ -60,11 +66,15 @@ def row_outline(left, right, front, back):
     at ``a``, rounded) that the object hides from the right camera counted at
     ``HIDDEN_COST`` each; the rows that hold the object are the one run of rows whose
     summed gain over the background alone is largest.  ``left``, ``right`` as in
-    :func:`pixel_costs`.  Returns ``(mask, cost)``: the object (bool ``(H, W)``) and the
-    whole image's cost summed, over ``H W``."""
+    :func:`pixel_costs`; ``allowed`` (bool ``(H, W)``, optional): where the object may lie
+    (elsewhere its cost exceeds the background's by more than any pixel can gain).
+    Returns ``(mask, cost)``: the object (bool ``(H, W)``) and the whole image's cost
+    summed, over ``H W``."""
     H, W = front.shape
     fore = pixel_costs(left, right, front)
     behind = pixel_costs(left, right, back)
+    if allowed is not None:
+        fore = np.where(allowed, fore, behind + 2.0)
     zero = np.zeros((H, 1))
     P_back = np.concatenate([zero, np.cumsum(behind, axis=1)], axis=1)
     P_diff = np.concatenate([zero, np.cumsum(fore - behind, axis=1)], axis=1)
@@ -96,6 +106,19 @@ def row_outline(left, right, front, back):
     return mask, float((P_back[:, -1].sum() - best) / (H * W))
 
 
+def _near(mask, reach):
+    """The bounding box of ``mask`` widened by ``reach`` pixels on every side (bool, the
+    mask's shape); everything when ``mask`` is empty."""
+    near = np.zeros(mask.shape, bool)
+    if not mask.any():
+        near[:] = True
+        return near
+    ys, xs = np.nonzero(mask)
+    near[max(ys.min() - reach, 0):ys.max() + reach + 1,
+         max(xs.min() - reach, 0):xs.max() + reach + 1] = True
+    return near
+
+
 def _layer(left, right, mask, region, surface, d_max):
     """The plane fitted to ``surface`` over ``mask`` and the offsets of its teeth over
     ``region`` (0 among them)."""
@@ -111,6 +134,7 @@ def choose_layers(left, right, foreground, surface, d_max):
     (left view).  Returns ``(mask, front, back, cost)``, ``front`` and ``back`` planes on
     the whole grid; None when no pair has the object in front."""
     best = None
+    allowed = _near(foreground, REACH)
     for _ in range(ROUNDS):
         if not foreground.any() or foreground.all():
             break
@@ -123,7 +147,7 @@ def choose_layers(left, right, foreground, surface, d_max):
             for r in back_teeth:
                 if np.median((front - back)[foreground]) + s - r < MIN_JUMP:
                     continue
-                mask, cost = row_outline(left, right, front + s, back + r)
+                mask, cost = row_outline(left, right, front + s, back + r, allowed)
                 if found is None or cost < found[3]:
                     found = (mask, front + s, back + r, cost)
         if found is None or (best is not None and found[3] >= best[3]):
