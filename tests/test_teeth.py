@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lss_kernels import Params
-from lss_kernels.checks import teeth
+from lss_kernels.checks import outline, teeth
 from lss_kernels.checks.pair import CheckedPair
 from lss_kernels.checks.recovery import with_recovery
 from lss_kernels.metrics import score
@@ -76,15 +76,97 @@ def test_a_periodic_solve_a_tooth_off_is_moved_to_the_true_one(ti_arch, scene, p
 def test_a_background_left_in_front_of_the_moved_object_goes_to_the_nearest_tooth_behind(
         ti_arch, scene):
     # the solve put the background three periods too near (in front of the true object):
-    # the pair cannot say which of its teeth is true (the images are the same), the nearest
-    # one behind the object is taken, and the model is sound
+    # the move takes the nearest of its teeth behind the object, and the model is sound
+    # (the outline read row by row may then take another tooth behind it)
     pair = CheckedPair(scene.left, scene.right, scene.d_max, tuple(scene.init_ellipse), "left",
                        Params())
     result, _ = with_recovery(lambda p: (wrong_tooth(scene, 2, -7, background=3), None),
                               Params(), pair.d_max, pair)
     assert result.recovery["collapse"] is None
-    assert np.median(result.surface[~result.foreground]) == pytest.approx(D_BG + 2 * PERIOD,
-                                                                          abs=0.3)
+    back = float(np.median(result.surface[~result.foreground]))
+    assert back < D_FG - 1.0
+    assert (back - D_BG) / PERIOD == pytest.approx(round((back - D_BG) / PERIOD), abs=0.06)
     tooth = result.recovery["tooth"]
     assert tooth["offset"] == pytest.approx(2 * PERIOD, abs=0.5)
     assert tooth["background_offset"] == pytest.approx(-PERIOD, abs=0.3)
+
+
+# The outline itself wrong (checks/outline.py): the solve ends with the background in front
+# of the object and an outline that is not the object's (periodic_diff, periodic_same_mid,
+# periodic_fg_fine_weak_bg of the periodic set); no move of that outline is the object's.
+P_FG, P_BG = 4.4, 12.5
+
+
+@pytest.fixture(scope="module")
+def weak_background():
+    return make_scene(None, seed=5, width=160, height=120, d_fg=D_FG, d_bg=D_BG,
+                      ellipse=(84.0, 60.0, 34.0, 38.0),
+                      texture_fg={"kind": "stripes", "period": P_FG},
+                      texture_bg={"kind": "low_contrast", "amplitude": 6 / 255,
+                                  "brightness": 0.45})
+
+
+@pytest.fixture(scope="module")
+def two_periods():
+    return make_scene(None, seed=4, width=160, height=120, d_fg=D_FG, d_bg=D_BG,
+                      ellipse=(84.0, 60.0, 34.0, 38.0),
+                      texture_fg={"kind": "stripes", "period": P_FG},
+                      texture_bg={"kind": "stripes", "period": P_BG})
+
+
+def swapped(scene, d_fg, d_bg):
+    """A Result-like model of ``scene`` as the solve leaves those scenes: an outline that is
+    the object's cut by a third and moved, the object's surface at ``d_fg`` and the
+    background's at ``d_bg`` (in front of it)."""
+    fg = np.roll(scene.fg_left, 9, axis=1) & (np.arange(scene.fg_left.shape[0]) > 50)[:, None]
+    surface = np.where(fg, d_fg, d_bg).astype(np.float32)
+    from lss_kernels.model.layers import occlusion_by_layers
+    occlusion = occlusion_by_layers(surface, fg.astype(np.int32))
+    return SimpleNamespace(foreground=fg, surface=surface, disparity=surface.copy(),
+                           occlusion=occlusion, confidence=np.ones(fg.shape, np.float32),
+                           phi=np.where(fg, 1.0, -1.0).astype(np.float32), layers=None,
+                           theta_fg=np.array([0, 0, 0, 0, 0, d_fg], np.float32),
+                           theta_bg=np.array([0, 0, 0, 0, 0, d_bg], np.float32),
+                           recovery={})
+
+
+def solved_as(scene, model):
+    pair = CheckedPair(scene.left, scene.right, scene.d_max, tuple(scene.init_ellipse), "left",
+                       Params())
+    return with_recovery(lambda p: (model(), None), Params(), pair.d_max, pair)[0]
+
+
+def test_the_row_outline_of_the_true_surfaces_is_the_object(two_periods):
+    left = two_periods.left.astype(np.float64)
+    right = teeth.upsampled(two_periods.right.astype(np.float64))
+    fg = two_periods.fg_left
+    mask, _ = outline.row_outline(left, right, np.full(fg.shape, D_FG), np.full(fg.shape, D_BG))
+    assert (mask & fg).sum() / (mask | fg).sum() > 0.97
+
+
+def test_layers_swapped_over_a_weak_background_are_read_again_from_the_pair(
+        ti_arch, weak_background):
+    scene = weak_background
+    result = solved_as(scene, lambda: swapped(scene, D_BG + 2.0, D_FG + 3 * P_FG))
+    fg = scene.fg_left
+    assert (result.foreground & fg).sum() / (result.foreground | fg).sum() > 0.95
+    assert np.median(result.surface[fg & result.foreground]) == pytest.approx(D_FG, abs=0.5)
+    assert np.median(result.surface[~fg & ~result.foreground]) == pytest.approx(D_BG, abs=0.5)
+    assert score(result.surface, result.occlusion, scene)["occ_f1"] > 0.9
+    assert result.recovery["tooth"]["outline"]["taken"]
+    assert (np.asarray(result.phi) > 0).mean() == pytest.approx(fg.mean(), abs=0.02)
+
+
+def test_a_background_in_front_on_two_periods_gives_the_object_its_outline(ti_arch,
+                                                                           two_periods):
+    # the background's tooth is not in the pair (module text of checks/teeth.py): any of
+    # them behind the object will do; the object's outline and tooth are
+    scene = two_periods
+    result = solved_as(scene, lambda: swapped(scene, D_FG - 3 * P_FG, D_BG + P_BG))
+    fg = scene.fg_left
+    assert (result.foreground & fg).sum() / (result.foreground | fg).sum() > 0.95
+    assert np.median(result.surface[fg & result.foreground]) == pytest.approx(D_FG, abs=0.5)
+    back = float(np.median(result.surface[~result.foreground]))
+    assert back < D_FG - 1.0
+    assert (back - D_BG) / P_BG == pytest.approx(round((back - D_BG) / P_BG), abs=0.1)
+    assert result.recovery["collapse"] is None

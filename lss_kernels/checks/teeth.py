@@ -378,11 +378,17 @@ def on_tooth(result, left, right, d_max):
     occlusion of the moved surfaces (:func:`~lss_kernels.model.layers.occlusion_by_layers`;
     confidence 0 there), Theta_1's constant term by ``s`` and phi by ``t - s / 2`` columns
     (the cyclopean frame).  Returns ``(result, info)``; ``result`` is changed in place."""
-    from ..model.layers import occlusion_by_layers
     foreground = np.asarray(result.foreground, bool)
     (s, t, plane), info = choose_tooth(left, right, foreground, result.surface, d_max)
-    if s == 0.0 and t == 0 and plane is None:
-        return result, info
+    if not (s == 0.0 and t == 0 and plane is None):
+        _moved(result, foreground, s, t, plane, info, d_max)
+    return result, info
+
+
+def _moved(result, foreground, s, t, plane, info, d_max):
+    """``result`` moved in place as :func:`on_tooth` says, by ``s`` px and ``t`` columns
+    onto the surface ``plane`` (None: the solved one)."""
+    from ..model.layers import occlusion_by_layers
     solved = np.asarray(result.surface, np.float64)
     model = _Model(foreground, solved, plane)
     moved_fg, surface = model.at(s, t)
@@ -411,7 +417,6 @@ def on_tooth(result, left, right, d_max):
         theta[5] += s
     result.theta_fg = theta.astype(np.asarray(result.theta_fg).dtype)
     result.phi = _shifted_rows(np.asarray(result.phi, np.float32), t - info["offset"] / 2.0)
-    return result, info
 
 
 def _behind(foreground, surface, background, period):

@@ -1,0 +1,221 @@
+"""The object's outline read row by row from the pair, for each pair of teeth of the two
+layers: the check after :func:`~lss_kernels.checks.teeth.on_tooth` for when the solve's
+outline itself is wrong, not only a tooth off.
+
+On stripes on both layers the alternation can end with the two surfaces on wrong teeth, or
+the background in front of the object, and its outline is then the boundary of whatever
+region those surfaces explain, not the object's (``periodic_diff``, ``periodic_same_mid``
+of ``lss_kernels.stress --periodic``).  Moving that outline (:mod:`.teeth`) cannot repair
+it.  But with Theta_1 and Theta_2 fixed, Eq. (1) along one row, with an object that spans
+one run ``[a, b)`` of it, is a function of ``a`` and ``b`` alone (the scanline problem of
+Belhumeur, cited in Sec. 1): the foreground's matching cost over ``[a, b)``, the
+background's over the rest, and the strip ``[a - Delta theta, a)`` hidden from the right
+camera.  Its exact minimum over ``a <= b`` takes two prefix sums and a running minimum
+(:func:`row_outline`), so the outline of every candidate pair of surfaces costs one pass
+over the image.  The candidates are each layer's plane (fitted to the solved surface over
+its region) moved to the teeth where its region matches best
+(:func:`~lss_kernels.checks.teeth._teeth`), every pair with the object at least
+``MIN_JUMP`` in front, with the object within ``REACH`` pixels of the solved object's box
+(a whole photo's other objects can be explained by the same planes); the best pair's
+outline gives the regions of a second round
+(``ROUNDS``), whose teeth are read from the right pixels.  :func:`on_layers` takes the
+best when its warp explains the right image better than the solved model
+(:func:`~lss_kernels.checks.recovery.with_recovery` calls it after each solve of a periodic
+pair, after :func:`~lss_kernels.checks.teeth.on_tooth`).
+"""
+import numpy as np
+
+from ..params import PHI_SCALE
+from .teeth import (HIDDEN_COST, MIN_GAIN, MIN_JUMP, UPSAMPLE, _coefficients, _eroded, _sample,
+                    _teeth, plane_of, upsampled, warp_cost)
+
+__all__ = ["INNER", "OUTER", "REACH", "ROUNDS", "choose_layers", "on_layers", "pixel_costs",
+           "row_outline"]
+
+#: Rounds of the search: each reads the teeth from the regions of the last round's outline.
+ROUNDS = 2
+#: The outline is searched within this many pixels of the solved object's bounding box: the
+#: solve puts the object near where it is, and a row's run of object pixels must not spread
+#: over other objects of a whole photo that the two planes happen to explain.
+REACH = 32
+#: Erosions (4-neighbour) of the object's region, and of the rest, over which a layer's
+#: teeth are read: a solved outline that is off puts the other layer's texture near it.
+INNER, OUTER = 3, 6
+
+
+def pixel_costs(left, right, disparity):
+    """Per left pixel, the absolute difference (mean over channels) from the right image at
+    ``x - disparity`` (the Eq. 1 matching cost ``M`` of the AD kind), ``HIDDEN_COST`` where
+    that lies outside the right image.  ``left`` ``(H, W, C)``, ``right`` :func:`upsampled
+    <lss_kernels.checks.teeth.upsampled>` by ``UPSAMPLE``, ``disparity`` ``(H, W)``, left
+    view.  Returns ``(H, W)``."""
+    H, W = disparity.shape
+    ys, xs = np.mgrid[0:H, 0:W]
+    r = xs - disparity
+    ok = (r >= 0) & (r <= W - 1)
+    cost = np.full((H, W), HIDDEN_COST)
+    cost[ok] = np.abs(left[ok] - _sample(right, ys[ok], r[ok] * UPSAMPLE)).mean(axis=-1)
+    return cost
+
+
+def row_outline(left, right, front, back, allowed=None):
+    """The object's outline that minimises Eq. (1) for the surfaces ``front`` (Theta_1) and
+    ``back`` (Theta_2), ``(H, W)`` left view, with no length term: in each row the run
+    ``[a, b)`` of object pixels that minimises the foreground's :func:`pixel_costs` over it,
+    plus the background's over the rest, the pixels ``[a - Delta, a)`` (``Delta`` the jump
+    at ``a``, rounded) that the object hides from the right camera counted at
+    ``HIDDEN_COST`` each; the rows that hold the object are the one run of rows whose
+    summed gain over the background alone is largest.  ``left``, ``right`` as in
+    :func:`pixel_costs`; ``allowed`` (bool ``(H, W)``, optional): where the object may lie
+    (elsewhere its cost exceeds the background's by more than any pixel can gain).
+    Returns ``(mask, cost)``: the object (bool ``(H, W)``) and the whole image's cost
+    summed, over ``H W``."""
+    H, W = front.shape
+    fore = pixel_costs(left, right, front)
+    behind = pixel_costs(left, right, back)
+    if allowed is not None:
+        fore = np.where(allowed, fore, behind + 2.0)
+    zero = np.zeros((H, 1))
+    P_back = np.concatenate([zero, np.cumsum(behind, axis=1)], axis=1)
+    P_diff = np.concatenate([zero, np.cumsum(fore - behind, axis=1)], axis=1)
+    cols = np.arange(W + 1)
+    jump = front - back
+    jump = np.concatenate([jump, jump[:, -1:]], axis=1)
+    start = np.clip(cols[None, :] - np.clip(np.rint(jump), 0, None).astype(np.int64), 0, None)
+    # a row's cost less the background's alone: enter(a) + leave(b), a <= b
+    enter = (-P_diff - P_back + np.take_along_axis(P_back, start, axis=1)
+             + HIDDEN_COST * (cols[None, :] - start))
+    total = np.minimum.accumulate(enter, axis=1) + P_diff
+    b = total.argmin(axis=1)
+    a = np.where(cols[None, :] <= b[:, None], enter, np.inf).argmin(axis=1)
+    rows = np.arange(H)
+    gain = np.where(b > a, -total[rows, b], 0.0)
+    # the run of rows with the largest summed gain (Kadane)
+    best, run, first, span = 0.0, 0.0, 0, None
+    for y in range(H):
+        if run <= 0.0:
+            run, first = 0.0, y
+        run += gain[y]
+        if run > best:
+            best, span = run, (first, y + 1)
+    mask = np.zeros((H, W), bool)
+    if span is not None:
+        x = np.arange(W)[None, :]
+        y0, y1 = span
+        mask[y0:y1] = (x >= a[y0:y1, None]) & (x < b[y0:y1, None])
+    return mask, float((P_back[:, -1].sum() - best) / (H * W))
+
+
+def _near(mask, reach):
+    """The bounding box of ``mask`` widened by ``reach`` pixels on every side (bool, the
+    mask's shape); everything when ``mask`` is empty."""
+    near = np.zeros(mask.shape, bool)
+    if not mask.any():
+        near[:] = True
+        return near
+    ys, xs = np.nonzero(mask)
+    near[max(ys.min() - reach, 0):ys.max() + reach + 1,
+         max(xs.min() - reach, 0):xs.max() + reach + 1] = True
+    return near
+
+
+def _layer(left, right, mask, region, surface, d_max):
+    """The plane fitted to ``surface`` over ``mask`` and the offsets of its teeth over
+    ``region`` (0 among them)."""
+    plane = plane_of(mask, surface)
+    offsets = _teeth(left, right, region, plane, -plane.min(), float(d_max) - plane.max())
+    return plane, sorted({0.0, *offsets})
+
+
+def choose_layers(left, right, foreground, surface, d_max):
+    """The pair of layer teeth, and the outline (:func:`row_outline`), that explain the pair
+    best, as the module text says.  ``left`` ``(H, W, C)``, ``right`` upsampled as in
+    :func:`pixel_costs`; ``foreground`` bool and ``surface`` ``(H, W)``, the solved model
+    (left view).  Returns ``(mask, front, back, cost)``, ``front`` and ``back`` planes on
+    the whole grid; None when no pair has the object in front."""
+    best = None
+    allowed = _near(foreground, REACH)
+    for _ in range(ROUNDS):
+        if not foreground.any() or foreground.all():
+            break
+        front, front_teeth = _layer(left, right, foreground, _eroded(foreground, INNER),
+                                    surface, d_max)
+        back, back_teeth = _layer(left, right, ~foreground, _eroded(~foreground, OUTER),
+                                  surface, d_max)
+        found = None
+        for s in front_teeth:
+            for r in back_teeth:
+                if np.median((front - back)[foreground]) + s - r < MIN_JUMP:
+                    continue
+                mask, cost = row_outline(left, right, front + s, back + r, allowed)
+                if found is None or cost < found[3]:
+                    found = (mask, front + s, back + r, cost)
+        if found is None or (best is not None and found[3] >= best[3]):
+            break
+        best = found
+        foreground, surface = found[0], np.where(found[0], found[1], found[2])
+    return best
+
+
+def on_layers(result, left, right, d_max):
+    """``result`` (a :class:`~lss_kernels.result.Result` of the pair ``left``, ``right``,
+    after :func:`~lss_kernels.checks.teeth.on_tooth`) replaced in place by the layers and
+    outline that :func:`choose_layers` reads from the pair when their warp
+    (:func:`~lss_kernels.checks.teeth.warp_cost`) differs from the right image by
+    ``MIN_GAIN`` less than ``result``'s does: the two planes as the surfaces (the refined
+    disparity kept where a pixel's layer and surface are unchanged, to half a pixel),
+    Theta_1 and Theta_2 the planes in the cyclopean frame, phi ``PHI_SCALE`` times the
+    signed distance along each row to the outline moved to the cyclopean frame, the
+    occlusion of the new surfaces (confidence 0 there).  Returns what was found (None: no
+    pair of teeth with the object in front); ``result`` is changed in place."""
+    from ..model.layers import occlusion_by_layers
+    left = np.asarray(left, np.float64)
+    right = np.asarray(right, np.float64)
+    if left.ndim == 2:
+        left, right = left[..., None], right[..., None]
+    right = upsampled(right)
+    foreground = np.asarray(result.foreground, bool)
+    solved = np.asarray(result.surface, np.float64)
+    found = choose_layers(left, right, foreground, solved, d_max)
+    if found is None:
+        return None
+    mask, front, back, _ = found
+    surface = np.where(mask, front, back)
+    before = warp_cost(left, right, foreground, solved, UPSAMPLE)[0]
+    after = warp_cost(left, right, mask, surface, UPSAMPLE)[0]
+    taken = bool(after < (1.0 - MIN_GAIN) * before and mask.any())
+    info = {"cost_before": before, "cost": after, "taken": taken,
+            "front": float(np.median(front[mask])) if mask.any() else None,
+            "back": float(np.median(back[~mask]))}
+    if not taken:
+        return info
+    same = (mask == foreground) & (np.abs(surface - solved) <= 0.5)
+    clean = lambda d: np.clip(d, 0.0, d_max).astype(np.float32)
+    result.disparity = clean(np.where(same, result.disparity, surface))
+    result.foreground, result.surface = mask, clean(surface)
+    result.occlusion = occlusion_by_layers(result.surface, mask.astype(np.int32))
+    result.confidence = np.where(result.occlusion, 0.0, result.confidence).astype(np.float32)
+    if result.layers is not None:
+        result.layers = mask.astype(np.uint8)
+    for name, plane, region in (("theta_fg", front, mask), ("theta_bg", back, ~mask)):
+        # d = a x_left + b y + c with x_left = x_cyclopean + d / 2
+        a, b, c = _coefficients(plane, region)
+        theta = np.array([0.0, 0.0, 0.0, a, b, c]) / (1.0 - a / 2.0)
+        setattr(result, name, theta.astype(np.asarray(getattr(result, name)).dtype))
+    result.phi = _row_distance(mask, front).astype(np.float32)
+    return info
+
+
+def _row_distance(mask, front):
+    """``PHI_SCALE`` times the signed distance along each row (> 0 inside) to the run of
+    ``mask`` (one a row, left view) moved to the cyclopean frame (``x - front / 2`` at its
+    ends); rows without it at minus the width."""
+    H, W = mask.shape
+    x = np.arange(W, dtype=np.float64)
+    phi = np.full((H, W), -float(W))
+    for y in np.nonzero(mask.any(axis=1))[0]:
+        cols = np.nonzero(mask[y])[0]
+        a = cols[0] - 0.5 - front[y, cols[0]] / 2.0
+        b = cols[-1] + 0.5 - front[y, cols[-1]] / 2.0
+        phi[y] = np.minimum(x - a, b - x)
+    return PHI_SCALE * phi
