@@ -81,12 +81,18 @@ def test_a_plane_stays_a_plane():
     assert singular[-1] < 1e-5 * singular[0]
 
 
-def test_selections_and_the_cloud_round_trip_through_plyfile(tmp_path):
-    H, W = 6, 8
-    fg = np.zeros((H, W), bool)
+def object_and_strip():
+    """A 6 x 8 left view: a 3 x 3 object and the 3 x 2 strip it hides to its left."""
+    fg = np.zeros((6, 8), bool)
     fg[2:5, 3:6] = True
-    occ = np.zeros((H, W), bool)
+    occ = np.zeros((6, 8), bool)
     occ[2:5, 1:3] = True
+    return fg, occ
+
+
+def test_selections_and_the_cloud_round_trip_through_plyfile(tmp_path):
+    fg, occ = object_and_strip()
+    H, W = fg.shape
     assert select("object", fg, occ).sum() == 9
     assert select("all", fg, occ).sum() == H * W - 6
     assert select("background", fg, occ).sum() == H * W - 6 - 9
@@ -112,11 +118,8 @@ def test_selections_and_the_cloud_round_trip_through_plyfile(tmp_path):
 
 
 def test_points_carry_their_confidence_and_min_confidence_keeps_the_sure_ones(tmp_path):
-    H, W = 5, 6
-    fg = np.zeros((H, W), bool)
-    fg[1:4, 2:5] = True
-    occ = np.zeros((H, W), bool)
-    occ[1:4, 0:2] = True
+    fg, occ = object_and_strip()
+    H, W = fg.shape
     conf = np.linspace(0, 1, H * W, dtype=np.float32).reshape(H, W)
     conf[occ] = 0
     # min_confidence leaves out the pixels below it, whichever the selection
@@ -126,7 +129,7 @@ def test_points_carry_their_confidence_and_min_confidence_keeps_the_sure_ones(tm
     for bad in (-0.1, 1.5, True, "0.3"):
         with pytest.raises(ValueError, match=r"^min_confidence: expected a number in \[0, 1\]"):
             select("all", fg, occ, conf, bad)
-    with pytest.raises(ValueError, match=r"^confidence: expected an array of shape \(5, 6\)"):
+    with pytest.raises(ValueError, match=r"^confidence: expected an array of shape \(6, 8\)"):
         select("all", fg, occ, None, 0.2)
     c = Calibration(focal=50.0, baseline=2.0)
     d = np.where(fg, 20.0, 5.0).astype(np.float32)
@@ -136,7 +139,7 @@ def test_points_carry_their_confidence_and_min_confidence_keeps_the_sure_ones(tm
     names = [p.name for p in PlyData.read(str(path))["vertex"].properties]
     assert names == ["x", "y", "z", "red", "green", "blue", "layer", "confidence"]
     np.testing.assert_array_equal(read_ply(path)["confidence"], conf[~occ])
-    with pytest.raises(ValueError, match=r"^confidence: expected an array of shape \(5, 6\)"):
+    with pytest.raises(ValueError, match=r"^confidence: expected an array of shape \(6, 8\)"):
         cloud(c, d, image, fg.astype(np.uint8), select("all", fg, occ), conf[:2])
 
 

@@ -156,17 +156,19 @@ class GlobalShapes:
         it."""
         xn = (x - self.cx) * self.inv_s
         yn = (y - self.cy) * self.inv_s
-        v = quadratic(self._coefficients(j), xn, yn)
-        if ti.static(self.local):
-            if j == 1 and self.local_ready[None] == 1:
-                v = self._blend(x, y, xn, yn)
-        return v
+        return self._at(j, x, y, xn, yn)
 
     @ti.func
     def value(self, j, x, y):
         """Theta_j at real cyclopean pixel coordinates (x, y); with a local background
         (:meth:`fit_local`), Theta_2 is its blend of the tiles' quadratics."""
         xn, yn = self.normalised(x, y)
+        return self._at(j, x, y, xn, yn)
+
+    @ti.func
+    def _at(self, j, x, y, xn, yn):
+        """Theta_j at (x, y), normalised ``(xn, yn)``: the quadratic, or the local
+        background's blend."""
         v = quadratic(self._coefficients(j), xn, yn)
         if ti.static(self.local):
             if j == 1 and self.local_ready[None] == 1:
