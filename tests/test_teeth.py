@@ -91,6 +91,20 @@ def test_a_background_left_in_front_of_the_moved_object_goes_to_the_nearest_toot
     assert tooth["background_offset"] == pytest.approx(-PERIOD, abs=0.3)
 
 
+def test_a_background_in_front_of_an_object_on_its_tooth_goes_behind_it(ti_arch, scene):
+    # the object solved right, the background a whole period too near for it to lie
+    # behind: the object stays, the background takes the nearest of its teeth behind
+    model = wrong_tooth(scene, periods=0, shift=0, background=3)
+    result, info = teeth.on_tooth(model, scene.left, scene.right, scene.d_max)
+    assert (info["offset"], info["shift"]) == (0.0, 0)
+    assert (result.foreground == scene.fg_left).all()
+    assert info["background_offset"] == pytest.approx(-PERIOD, abs=0.3)
+    back = result.surface[~result.foreground]
+    assert np.abs(back - (D_BG + 2 * PERIOD)).max() < 0.1     # the period as read
+    assert result.theta_bg[5] == pytest.approx(D_BG + 2 * PERIOD, abs=0.1)
+    assert result.occlusion.sum() > 0
+
+
 # The outline itself wrong (checks/outline.py): the solve ends with the background in front
 # of the object and an outline that is not the object's (periodic_diff, periodic_same_mid,
 # periodic_fg_fine_weak_bg of the periodic set); no move of that outline is the object's.

@@ -25,8 +25,8 @@ taken as seen), one too large about ``k P``; the right one none.  The background
 not in the pair: with a periodic background of constant disparity the two images are the
 same, pixel for pixel, for ``d_bg`` and ``d_bg + P`` (every background pixel matches a
 period away, and the occluded strip's width cannot be read).  It is left as solved, unless
-it lies less than ``MIN_JUMP`` behind the moved object: then it goes to the nearest of its
-teeth behind (:func:`_behind`).
+it lies less than ``MIN_JUMP`` behind the object, moved or not: then it goes to the nearest
+of its teeth behind (:func:`_behind`).
 """
 import numpy as np
 
@@ -193,8 +193,8 @@ def choose_tooth(left, right, foreground, surface, d_max):
     info = {"offset": 0.0, "shift": 0, "shape": "solved"}
     if not foreground.any() or foreground.all() or foreground.shape != left.shape[:2]:
         return (0.0, 0, None), info
-    period = row_period(left, _eroded(foreground, 2))
     behind = row_period(left, _eroded(~foreground, 2))
+    period = row_period(left, _eroded(foreground, 2))
     info.update(period=period, background_period=behind)
     if period is None:
         return (0.0, 0, None), info
@@ -380,7 +380,14 @@ def on_tooth(result, left, right, d_max):
     (the cyclopean frame).  Returns ``(result, info)``; ``result`` is changed in place."""
     foreground = np.asarray(result.foreground, bool)
     (s, t, plane), info = choose_tooth(left, right, foreground, result.surface, d_max)
-    if not (s == 0.0 and t == 0 and plane is None):
+    moved = not (s == 0.0 and t == 0 and plane is None)
+    if not moved:
+        # the object stays, but a periodic background solved on a tooth in front of it
+        # still goes behind it
+        solved = np.asarray(result.surface, np.float64)
+        moved = bool(_behind(foreground, solved, _Model(foreground, solved).background,
+                             info.get("background_period")))
+    if moved:
         _moved(result, foreground, s, t, plane, info, d_max)
     return result, info
 
