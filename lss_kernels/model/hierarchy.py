@@ -164,6 +164,10 @@ class PatchHierarchy:
         self._lo = pool.field(ti.f32, (), bucket=True)
         self._hi = pool.field(ti.f32, (), bucket=True)
         self.curve = pool.field(ti.f32, (C,), volume=True)
+        # the pixels' M while level 1 is built from it: the top level's volume (built last,
+        # from its children), a volume of its own when level 1 is the only level
+        self._pixel_cost = (self.levels[-1].cost if len(self.levels) > 1 else
+                            pool.field(ti.f32, (H, W, C), volume=True))
         #: How many times the cost volumes were built (the message cache depends on them).
         self.cost_version = 0
 
@@ -208,22 +212,31 @@ class PatchHierarchy:
             return self.extent.height(), self.extent.width(), self.image_blocks_now()
 
     @ti.func
-    def _cost_from_pixels(self, matcher: ti.template(), left: ti.template(),
-                          right: ti.template(), level: ti.template()):
-        """Level 1's volume (in its memory order: rows, disparities, columns)."""
+    def _pixel_costs(self, matcher: ti.template(), left: ti.template(),
+                     right: ti.template(), scratch: ti.template()):
+        """M(x, y, c) of every in-image pixel and candidate into ``scratch`` (a volume that
+        holds ``[0, H) x [0, W) x c_max``), once: each is read by the 9 patches of level 1
+        that contain the pixel."""
+        H, W = self.extent.height(), self.extent.width()
+        for y, x, k in ti.ndrange(H, W, self.C):
+            c = k + 1
+            scratch[y, x, k] = matcher.cost(left, right, y, ti.min(x + c, W - 1),
+                                            ti.max(x - c, 0))
+
+    @ti.func
+    def _cost_from_pixels(self, pixels: ti.template(), level: ti.template()):
+        """Level 1's volume (in its memory order: rows, disparities, columns) from the
+        pixels' M in ``pixels`` (:meth:`_pixel_costs`)."""
         H, W = self.extent.height(), self.extent.width()
         dst, offs, m = ti.static(level.cost, level.offsets, level.margin)
         for y, k, x in ti.ndrange((-m, H + m), self.C, (-m, W + m)):
-            c = k + 1
             total = 0.0
             n = 0
             for jy, jx in ti.static(ti.ndrange(len(offs), len(offs))):
                 py = y + offs[jy]
                 px = x + offs[jx]
                 if 0 <= py < H and 0 <= px < W:
-                    xl = ti.min(px + c, W - 1)
-                    xr = ti.max(px - c, 0)
-                    total += matcher.cost(left, right, py, xl, xr)
+                    total += pixels[py, px, k]
                     n += 1
             dst[y, x, k] = total / ti.max(n, 1)
 
@@ -278,9 +291,10 @@ class PatchHierarchy:
 
     @ti.kernel
     def _build_costs(self, matcher: ti.template(), left: ti.template(), right: ti.template()):
-        """Every level's volume in one launch: level 1 from the pixels, each higher level
-        from its children, then each normalised."""
-        self._cost_from_pixels(matcher, left, right, self.levels[0])
+        """Every level's volume in one launch: the pixels' M, level 1 from them, each higher
+        level from its children, then each normalised."""
+        self._pixel_costs(matcher, left, right, self._pixel_cost)
+        self._cost_from_pixels(self._pixel_cost, self.levels[0])
         for i in ti.static(range(1, len(self.levels))):
             self._cost_from_children(self.levels[i - 1], self.levels[i])
         for i in ti.static(range(len(self.levels))):
