@@ -81,35 +81,47 @@ class DistanceTransform:
         for t in range(count):
             line = start + t
             o = t * (n + 1)                   # this line's stretch of the buffers
+            near = 0                          # whether the line holds a finite value
             for i in range(n):
                 a, b, c = self._index(axis, line, i, n1, n2)
-                self.g[o + i] = f[a, b, c]
-            # lower envelope of the parabolas rooted at (q, g[q]); z[0] = -INF is a sentinel
-            # that no intersection reaches, since |g| <= INF keeps |s| < INF / 2 + n
-            k = 0
-            self.v[o] = 0
-            self.z[o] = -INF
-            self.z[o + 1] = INF
-            for q in range(1, n):
-                fq = self.g[o + q] + ti.cast(q * q, ti.f32)
+                value = f[a, b, c]
+                self.g[o + i] = value
+                if value < INF:
+                    near = 1
+            if near == 1:
+                self._envelope(f, axis, line, o, n, n1, n2)
+
+    @ti.func
+    def _envelope(self, f: ti.template(), axis, line, o, n, n1, n2: ti.template()):
+        """The 1-D transform of a line loaded into ``g`` from ``o`` on, written back into
+        ``f``.  A line of INF alone is left as it is: every value would be
+        ``min((q - p)^2 + INF, INF) = INF`` again (the square vanishes in INF's rounding)."""
+        # lower envelope of the parabolas rooted at (q, g[q]); z[0] = -INF is a sentinel
+        # that no intersection reaches, since |g| <= INF keeps |s| < INF / 2 + n
+        k = 0
+        self.v[o] = 0
+        self.z[o] = -INF
+        self.z[o + 1] = INF
+        for q in range(1, n):
+            fq = self.g[o + q] + ti.cast(q * q, ti.f32)
+            p = self.v[o + k]
+            s = (fq - (self.g[o + p] + ti.cast(p * p, ti.f32))) / ti.cast(2 * (q - p), ti.f32)
+            while s <= self.z[o + k]:
+                k -= 1
                 p = self.v[o + k]
-                s = (fq - (self.g[o + p] + ti.cast(p * p, ti.f32))) / ti.cast(2 * (q - p), ti.f32)
-                while s <= self.z[o + k]:
-                    k -= 1
-                    p = self.v[o + k]
-                    s = (fq - (self.g[o + p] + ti.cast(p * p, ti.f32))) / ti.cast(2 * (q - p),
-                                                                                 ti.f32)
+                s = (fq - (self.g[o + p] + ti.cast(p * p, ti.f32))) / ti.cast(2 * (q - p),
+                                                                             ti.f32)
+            k += 1
+            self.v[o + k] = q
+            self.z[o + k] = s
+            self.z[o + k + 1] = INF
+        k = 0
+        for q in range(n):
+            while self.z[o + k + 1] < ti.cast(q, ti.f32):
                 k += 1
-                self.v[o + k] = q
-                self.z[o + k] = s
-                self.z[o + k + 1] = INF
-            k = 0
-            for q in range(n):
-                while self.z[o + k + 1] < ti.cast(q, ti.f32):
-                    k += 1
-                p = self.v[o + k]
-                a, b, c = self._index(axis, line, q, n1, n2)
-                f[a, b, c] = ti.min(ti.cast((q - p) * (q - p), ti.f32) + self.g[o + p], INF)
+            p = self.v[o + k]
+            a, b, c = self._index(axis, line, q, n1, n2)
+            f[a, b, c] = ti.min(ti.cast((q - p) * (q - p), ti.f32) + self.g[o + p], INF)
 
     def run(self, f, size) -> None:
         """The transform of the ``size`` (``(n0, n1)``) corner of ``f``, in place."""
