@@ -2,19 +2,24 @@
 
 Taichi (1.7) re-does two pure computations for every AST node and every inlined ``ti.func``
 it visits; a 760x340 solver visits ~79,000 nodes at ~6,000 distinct positions and inlines
-~1,000 function bodies.  :func:`install` keeps the first answer of each:
+~1,000 function bodies.  :func:`install` keeps the first answer of each, and builds the
+answers it must build faster:
 
 * :func:`_memoise_source_positions`: the "File ..., line ..." text with the offending line and
   a caret line that Taichi builds for every node before it knows whether an error needs it
   (~2.5 s of a new solver's set-up with a warm kernel cache);
+* :func:`_fast_source_lines`: the ``textwrap`` wrapping of those two lines, which for a line
+  that fits in the width only drops trailing spaces, and is the same for every node of a
+  longer line (1.2 s of a paper15 solve's set-up on a busy 2-core CPU, ~27,000 wraps);
 * :func:`_memoise_source_reading`: the source of a kernel or ``ti.func`` that Taichi reads with
   ``inspect`` and re-wraps with ``textwrap`` at every instance and call site (0.54 s of the
   front end's 1.6 s).
 
-Both return Taichi's own values, so compiled kernels, their debug information and the keys of
+All return Taichi's own values, so compiled kernels, their debug information and the keys of
 the offline cache are unchanged, and so are results.  They touch private names of Taichi
-(``ASTTransformerContext.get_pos_info``, ``kernel_impl.getsourcelines`` and
-``kernel_impl.textwrap``) and skip themselves when a Taichi version lacks them.  Set the
+(``ASTTransformerContext.get_pos_info``, ``ast_transformer_utils.TextWrapper``,
+``kernel_impl.getsourcelines`` and ``kernel_impl.textwrap``) and skip themselves when a
+Taichi version lacks them.  Set the
 environment variable ``LSS_TAICHI_PATCHES=0`` before the first :func:`lss_kernels.kernels.
 backend.init` to leave Taichi untouched.
 """
@@ -42,6 +47,7 @@ def install() -> bool:
     if not enabled():
         return False
     _memoise_source_positions()
+    _fast_source_lines()
     _memoise_source_reading()
     return True
 
@@ -76,6 +82,54 @@ def _memoise_source_positions():
     get_pos_info._lss_memoised = True
     get_pos_info.original = build
     context.get_pos_info = get_pos_info
+
+
+def plain(wrapper) -> bool:
+    """Whether ``wrapper`` (a ``TextWrapper``) has the default settings but the width."""
+    return (wrapper.drop_whitespace and not wrapper.initial_indent
+            and not wrapper.subsequent_indent and wrapper.max_lines is None
+            and wrapper.expand_tabs and wrapper.tabsize == 8 and wrapper.replace_whitespace
+            and not wrapper.fix_sentence_endings and wrapper.break_long_words
+            and wrapper.break_on_hyphens and wrapper.placeholder == " [...]")
+
+
+def fits(wrapper, text: str) -> bool:
+    """Whether ``wrapper.wrap(text)`` is ``text`` less its trailing spaces (nothing for a
+    blank text), for a :func:`plain` wrapper: a text of printable ASCII (no tab, no
+    newline) that fits in the width.  ``textwrap`` then never breaks the line; it drops the
+    trailing run of spaces, and keeps the leading one when something follows it."""
+    return len(text) <= wrapper.width and text.isascii() and text.isprintable()
+
+
+def _fast_source_lines():
+    """Wrap the source line and the caret line of :func:`_memoise_source_positions`'s text
+    without ``textwrap``'s chunking when they fit in its width (:func:`fits`), and each
+    longer text once per process: the same lists.  Taichi builds the text once per AST node
+    position of every kernel (~27,000 wraps in a 760x340 solve; 6,000 of lines over the
+    width, several nodes to a line).  Skipped if this Taichi does not wrap with
+    ``ast_transformer_utils.TextWrapper``."""
+    base = getattr(_ast_utils, "TextWrapper", None)
+    if base is None or getattr(base, "_lss_fast", False):
+        return
+    wrapped = {}
+
+    class TextWrapper(base):
+        _lss_fast = True
+
+        def wrap(self, text):
+            if not plain(self):
+                return super().wrap(text)
+            if fits(self, text):
+                line = text.rstrip(" ")
+                return [line] if line else []
+            key = (self.width, text)
+            lines = wrapped.get(key)
+            if lines is None:
+                lines = wrapped[key] = super().wrap(text)
+            return list(lines)
+
+    TextWrapper.original = base
+    _ast_utils.TextWrapper = TextWrapper
 
 
 class _MemoisedTextwrap:
