@@ -124,9 +124,14 @@ class BoundaryCosts:
         image's height, or 0 for nothing)."""
         self._max[None] = 0.0
         width = self.extent.width()
-        for y, k, x in ti.ndrange(rows, self.C, width):
-            if vol[y, x, k] < INF * 0.5:
-                ti.atomic_max(self._max[None], ti.sqrt(vol[y, x, k]))
+        for y, k in ti.ndrange(rows, self.C):
+            # a row's largest first: one atomic per row, not one per voxel (a maximum is
+            # exact in any order)
+            largest = 0.0
+            for x in range(width):
+                if vol[y, x, k] < INF * 0.5:
+                    largest = ti.max(largest, ti.sqrt(vol[y, x, k]))
+            ti.atomic_max(self._max[None], largest)
         m = self._max[None]
         for y, k, x in ti.ndrange(rows, self.C, width):
             v = vol[y, x, k]
