@@ -184,3 +184,16 @@ def test_a_background_in_front_on_two_periods_gives_the_object_its_outline(ti_ar
     assert back < D_FG - 1.0
     assert (back - D_BG) / P_BG == pytest.approx(round((back - D_BG) / P_BG), abs=0.1)
     assert result.recovery["collapse"] is None
+
+
+
+def test_a_tooth_is_read_to_a_few_thousandths_of_a_pixel(weak_background):
+    # on stripes of 4.4 px a hundredth of a pixel off the tooth costs, over the object, as
+    # much as a wrong tooth's outline: the grid's 0.05 px is not enough
+    scene = weak_background
+    left = scene.left.astype(np.float64)
+    right = teeth.upsampled(scene.right.astype(np.float64))
+    inner = teeth._eroded(scene.fg_left, 3)
+    surface = np.full(scene.fg_left.shape, D_FG - 0.023)
+    offsets = teeth._teeth(left, right, inner, surface, -5.0, 5.0)
+    assert min(abs(s - 0.023) for s in offsets) < 0.006
