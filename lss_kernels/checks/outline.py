@@ -13,12 +13,15 @@ background's over the rest, and the strip ``[a - Delta theta, a)`` hidden from t
 camera.  Its exact minimum over ``a <= b`` takes two prefix sums and a running minimum
 (:func:`row_outline`), so the outline of every candidate pair of surfaces costs one pass
 over the image.  The candidates are each layer's plane (fitted to the solved surface over
-its region) moved to the teeth where its region matches best
-(:func:`~lss_kernels.checks.teeth._teeth`), every pair with the object at least
-``MIN_JUMP`` in front, with the object within ``REACH`` pixels of the solved object's box
-(a whole photo's other objects can be explained by the same planes); the best pair's
-outline gives the regions of a second round
-(``ROUNDS``), whose teeth are read from the right pixels.  :func:`on_layers` takes the
+its region), and the planes of the pair's combs read without the solve (:mod:`.comb`:
+when the alternation is lost, as on slanted layers, no plane of its surfaces is on any
+tooth), each moved to the teeth where its region matches best
+(:func:`~lss_kernels.checks.teeth._teeth`); every pair with the object at least
+``MIN_JUMP`` in front, the object within ``REACH`` pixels of the solved object's box, or,
+on a comb's plane, of the box of the pixels that support it (a whole photo's other
+objects can be explained by the same planes; a lost solve's object may lie anywhere).
+The best pair's outline gives the regions of a second round (``ROUNDS``), whose teeth are
+read from the right pixels.  :func:`on_layers` takes the
 best when its warp explains the right image better than the solved model
 (:func:`~lss_kernels.checks.recovery.with_recovery` calls it after each solve of a periodic
 pair, after :func:`~lss_kernels.checks.teeth.on_tooth`).
@@ -26,8 +29,9 @@ pair, after :func:`~lss_kernels.checks.teeth.on_tooth`).
 import numpy as np
 
 from ..params import PHI_SCALE
-from .teeth import (HIDDEN_COST, MIN_GAIN, MIN_JUMP, UPSAMPLE, _coefficients, _eroded, _sample,
-                    _teeth, plane_of, upsampled, warp_cost)
+from .comb import combs
+from .teeth import (HIDDEN_COST, MIN_GAIN, MIN_JUMP, UPSAMPLE, _coefficients, _eroded, _plane,
+                    _sample, _teeth, plane_of, upsampled, warp_cost)
 
 __all__ = ["INNER", "OUTER", "REACH", "ROUNDS", "choose_layers", "on_layers", "pixel_costs",
            "row_outline"]
@@ -70,16 +74,20 @@ def row_outline(left, right, front, back, allowed=None):
     (elsewhere its cost exceeds the background's by more than any pixel can gain).
     Returns ``(mask, cost)``: the object (bool ``(H, W)``) and the whole image's cost
     summed, over ``H W``."""
-    H, W = front.shape
-    fore = pixel_costs(left, right, front)
-    behind = pixel_costs(left, right, back)
+    return _outline(pixel_costs(left, right, front), pixel_costs(left, right, back),
+                    front - back, allowed)
+
+
+def _outline(fore, behind, jump, allowed=None):
+    """:func:`row_outline` from the two layers' :func:`pixel_costs` ``fore`` and ``behind``
+    and the jump ``front - back``."""
+    H, W = fore.shape
     if allowed is not None:
         fore = np.where(allowed, fore, behind + 2.0)
     zero = np.zeros((H, 1))
     P_back = np.concatenate([zero, np.cumsum(behind, axis=1)], axis=1)
     P_diff = np.concatenate([zero, np.cumsum(fore - behind, axis=1)], axis=1)
     cols = np.arange(W + 1)
-    jump = front - back
     jump = np.concatenate([jump, jump[:, -1:]], axis=1)
     start = np.clip(cols[None, :] - np.clip(np.rint(jump), 0, None).astype(np.int64), 0, None)
     # a row's cost less the background's alone: enter(a) + leave(b), a <= b
@@ -122,9 +130,26 @@ def _near(mask, reach):
 def _layer(left, right, mask, region, surface, d_max):
     """The plane fitted to ``surface`` over ``mask`` and the offsets of its teeth over
     ``region`` (0 among them)."""
-    plane = plane_of(mask, surface)
+    return _toothed(left, right, plane_of(mask, surface), region, d_max)
+
+
+def _toothed(left, right, plane, region, d_max):
+    """``plane`` and the offsets of its teeth over ``region`` (0 among them)."""
     offsets = _teeth(left, right, region, plane, -plane.min(), float(d_max) - plane.max())
     return plane, sorted({0.0, *offsets})
+
+
+def _combed(left, right, shape, d_max):
+    """The planes of the pair's combs (:func:`~lss_kernels.checks.comb.combs`) on a grid of
+    ``shape``, each with the offsets of its teeth over the pixels that support it and where
+    an object on it may lie: within ``REACH`` of their box."""
+    layers = []
+    for coef, ys, xs in combs(left, right, d_max):
+        region = np.zeros(shape, bool)
+        region[ys, xs] = True
+        layers.append((*_toothed(left, right, _plane(coef, shape), region, d_max),
+                       _near(region, REACH)))
+    return layers
 
 
 def choose_layers(left, right, foreground, surface, d_max):
@@ -135,21 +160,35 @@ def choose_layers(left, right, foreground, surface, d_max):
     the whole grid; None when no pair has the object in front."""
     best = None
     allowed = _near(foreground, REACH)
+    combed = _combed(left, right, foreground.shape, d_max)
     for _ in range(ROUNDS):
         if not foreground.any() or foreground.all():
             break
-        front, front_teeth = _layer(left, right, foreground, _eroded(foreground, INNER),
-                                    surface, d_max)
-        back, back_teeth = _layer(left, right, ~foreground, _eroded(~foreground, OUTER),
-                                  surface, d_max)
+        fronts = [(*_layer(left, right, foreground, _eroded(foreground, INNER), surface,
+                           d_max), allowed), *combed]
+        backs = [(*_layer(left, right, ~foreground, _eroded(~foreground, OUTER), surface,
+                          d_max), None), *combed]
+        combed = []                 # the next round's planes are fitted to this one's
+        costs = {}
+
+        def cost_of(plane, offset):
+            key = (id(plane), offset)
+            if key not in costs:
+                costs[key] = pixel_costs(left, right, plane + offset)
+            return costs[key]
+
         found = None
-        for s in front_teeth:
-            for r in back_teeth:
-                if np.median((front - back)[foreground]) + s - r < MIN_JUMP:
-                    continue
-                mask, cost = row_outline(left, right, front + s, back + r, allowed)
-                if found is None or cost < found[3]:
-                    found = (mask, front + s, back + r, cost)
+        for front, front_teeth, near in fronts:
+            for back, back_teeth, _ in backs:
+                jump = np.median((front - back)[foreground])
+                for r in back_teeth:
+                    for s in front_teeth:
+                        if jump + s - r < MIN_JUMP:
+                            continue
+                        mask, cost = _outline(cost_of(front, s), cost_of(back, r),
+                                              front + s - back - r, allowed | near)
+                        if found is None or cost < found[3]:
+                            found = (mask, front + s, back + r, cost)
         if found is None or (best is not None and found[3] >= best[3]):
             break
         best = found
