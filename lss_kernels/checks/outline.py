@@ -13,12 +13,15 @@ background's over the rest, and the strip ``[a - Delta theta, a)`` hidden from t
 camera.  Its exact minimum over ``a <= b`` takes two prefix sums and a running minimum
 (:func:`row_outline`), so the outline of every candidate pair of surfaces costs one pass
 over the image.  The candidates are each layer's plane (fitted to the solved surface over
-its region) moved to the teeth where its region matches best
-(:func:`~lss_kernels.checks.teeth._teeth`), every pair with the object at least
-``MIN_JUMP`` in front, with the object within ``REACH`` pixels of the solved object's box
-(a whole photo's other objects can be explained by the same planes); the best pair's
-outline gives the regions of a second round
-(``ROUNDS``), whose teeth are read from the right pixels.  :func:`on_layers` takes the
+its region), and the planes of the pair's combs read without the solve (:mod:`.comb`:
+when the alternation is lost, as on slanted layers, no plane of its surfaces is on any
+tooth), each moved to the teeth where its region matches best
+(:func:`~lss_kernels.checks.teeth._teeth`); every pair with the object at least
+``MIN_JUMP`` in front, the object within ``REACH`` pixels of the solved object's box, or,
+on a comb's plane, of the box of the pixels that support it (a whole photo's other
+objects can be explained by the same planes; a lost solve's object may lie anywhere).
+The best pair's outline gives the regions of a second round (``ROUNDS``), whose teeth are
+read from the right pixels.  :func:`on_layers` takes the
 best when its warp explains the right image better than the solved model
 (:func:`~lss_kernels.checks.recovery.with_recovery` calls it after each solve of a periodic
 pair, after :func:`~lss_kernels.checks.teeth.on_tooth`).
@@ -26,10 +29,11 @@ pair, after :func:`~lss_kernels.checks.teeth.on_tooth`).
 import numpy as np
 
 from ..params import PHI_SCALE
-from .teeth import (HIDDEN_COST, MIN_GAIN, MIN_JUMP, UPSAMPLE, _coefficients, _eroded, _sample,
-                    _teeth, plane_of, upsampled, warp_cost)
+from .comb import combs
+from .teeth import (HIDDEN_COST, MIN_GAIN, MIN_JUMP, UPSAMPLE, _coefficients, _eroded, _plane,
+                    _sample, _teeth, plane_of, upsampled, warp_cost)
 
-__all__ = ["INNER", "OUTER", "REACH", "ROUNDS", "choose_layers", "on_layers", "pixel_costs",
+__all__ = ["COMB_FIT", "INNER", "OUTER", "REACH", "ROUNDS", "choose_layers", "on_layers", "pixel_costs",
            "row_outline"]
 
 #: Rounds of the search: each reads the teeth from the regions of the last round's outline.
@@ -38,6 +42,14 @@ ROUNDS = 2
 #: solve puts the object near where it is, and a row's run of object pixels must not spread
 #: over other objects of a whole photo that the two planes happen to explain.
 REACH = 32
+#: Largest warp cost (:func:`~lss_kernels.checks.teeth.warp_cost`) of layers read on a
+#: comb's plane that :func:`on_layers` takes, a quarter of a hidden pixel's cost a pixel:
+#: two planes found without the solve are the pair's only where it holds two surfaces (a
+#: lost solve of stripes on both layers, 0.005-0.009), not where a whole photo's other
+#: surfaces leave more unexplained than the model they replace (``multi_handle`` of
+#: ``lss_kernels.stress --multi``, seed 0: 0.055 against 0.141, the object's outline
+#: spread over the background's rows, F1 0.79 -> 0.23).
+COMB_FIT = HIDDEN_COST / 4
 #: Erosions (4-neighbour) of the object's region, and of the rest, over which a layer's
 #: teeth are read: a solved outline that is off puts the other layer's texture near it.
 INNER, OUTER = 3, 6
@@ -70,16 +82,20 @@ def row_outline(left, right, front, back, allowed=None):
     (elsewhere its cost exceeds the background's by more than any pixel can gain).
     Returns ``(mask, cost)``: the object (bool ``(H, W)``) and the whole image's cost
     summed, over ``H W``."""
-    H, W = front.shape
-    fore = pixel_costs(left, right, front)
-    behind = pixel_costs(left, right, back)
+    return _outline(pixel_costs(left, right, front), pixel_costs(left, right, back),
+                    front - back, allowed)
+
+
+def _outline(fore, behind, jump, allowed=None):
+    """:func:`row_outline` from the two layers' :func:`pixel_costs` ``fore`` and ``behind``
+    and the jump ``front - back``."""
+    H, W = fore.shape
     if allowed is not None:
         fore = np.where(allowed, fore, behind + 2.0)
     zero = np.zeros((H, 1))
     P_back = np.concatenate([zero, np.cumsum(behind, axis=1)], axis=1)
     P_diff = np.concatenate([zero, np.cumsum(fore - behind, axis=1)], axis=1)
     cols = np.arange(W + 1)
-    jump = front - back
     jump = np.concatenate([jump, jump[:, -1:]], axis=1)
     start = np.clip(cols[None, :] - np.clip(np.rint(jump), 0, None).astype(np.int64), 0, None)
     # a row's cost less the background's alone: enter(a) + leave(b), a <= b
@@ -122,36 +138,72 @@ def _near(mask, reach):
 def _layer(left, right, mask, region, surface, d_max):
     """The plane fitted to ``surface`` over ``mask`` and the offsets of its teeth over
     ``region`` (0 among them)."""
-    plane = plane_of(mask, surface)
+    return _toothed(left, right, plane_of(mask, surface), region, d_max)
+
+
+def _toothed(left, right, plane, region, d_max):
+    """``plane`` and the offsets of its teeth over ``region`` (0 among them)."""
     offsets = _teeth(left, right, region, plane, -plane.min(), float(d_max) - plane.max())
     return plane, sorted({0.0, *offsets})
+
+
+def _combed(left, right, shape, d_max):
+    """The planes of the pair's combs (:func:`~lss_kernels.checks.comb.combs`) on a grid of
+    ``shape``, each with the offsets of its teeth over the pixels that support it, and
+    those pixels."""
+    layers = []
+    for coef, ys, xs in combs(left, right, d_max):
+        region = np.zeros(shape, bool)
+        region[ys, xs] = True
+        layers.append((*_toothed(left, right, _plane(coef, shape), region, d_max), region))
+    return layers
 
 
 def choose_layers(left, right, foreground, surface, d_max):
     """The pair of layer teeth, and the outline (:func:`row_outline`), that explain the pair
     best, as the module text says.  ``left`` ``(H, W, C)``, ``right`` upsampled as in
     :func:`pixel_costs`; ``foreground`` bool and ``surface`` ``(H, W)``, the solved model
-    (left view).  Returns ``(mask, front, back, cost)``, ``front`` and ``back`` planes on
-    the whole grid; None when no pair has the object in front."""
+    (left view).  Returns ``(mask, front, back, cost, combed)``, ``front`` and ``back``
+    planes on the whole grid, ``combed`` whether either is a comb's plane or fitted to a
+    comb's outline; None when no pair has the object in front."""
     best = None
     allowed = _near(foreground, REACH)
+    combed = _combed(left, right, foreground.shape, d_max)
     for _ in range(ROUNDS):
         if not foreground.any() or foreground.all():
             break
-        front, front_teeth = _layer(left, right, foreground, _eroded(foreground, INNER),
-                                    surface, d_max)
-        back, back_teeth = _layer(left, right, ~foreground, _eroded(~foreground, OUTER),
-                                  surface, d_max)
+        fronts = [(*_layer(left, right, foreground, _eroded(foreground, INNER), surface,
+                           d_max), None), *combed]
+        backs = [(*_layer(left, right, ~foreground, _eroded(~foreground, OUTER), surface,
+                          d_max), None), *combed]
+        fitted, combed = combed, []     # the next round's planes are fitted to this one's
+        costs = {}
+
+        def cost_of(plane, offset):
+            key = (id(plane), offset)
+            if key not in costs:
+                costs[key] = pixel_costs(left, right, plane + offset)
+            return costs[key]
+
         found = None
-        for s in front_teeth:
-            for r in back_teeth:
-                if np.median((front - back)[foreground]) + s - r < MIN_JUMP:
-                    continue
-                mask, cost = row_outline(left, right, front + s, back + r, allowed)
-                if found is None or cost < found[3]:
-                    found = (mask, front + s, back + r, cost)
+        for front, front_teeth, support in fronts:
+            near = allowed if support is None else allowed | _near(support, REACH)
+            for back, back_teeth, _ in backs:
+                jump = np.median((front - back)[foreground])
+                for r in back_teeth:
+                    for s in front_teeth:
+                        if jump + s - r < MIN_JUMP:
+                            continue
+                        mask, cost = _outline(cost_of(front, s), cost_of(back, r),
+                                              front + s - back - r, near)
+                        if found is None or cost < found[3]:
+                            combed_pair = support is not None or any(
+                                back is plane for plane, _, _ in fitted)
+                            found = (mask, front + s, back + r, cost, combed_pair)
         if found is None or (best is not None and found[3] >= best[3]):
             break
+        if best is not None:            # planes fitted to a comb's outline are a comb's
+            found = (*found[:4], found[4] or best[4])
         best = found
         foreground, surface = found[0], np.where(found[0], found[1], found[2])
     return best
@@ -162,7 +214,8 @@ def on_layers(result, left, right, d_max):
     after :func:`~lss_kernels.checks.teeth.on_tooth`) replaced in place by the layers and
     outline that :func:`choose_layers` reads from the pair when their warp
     (:func:`~lss_kernels.checks.teeth.warp_cost`) differs from the right image by
-    ``MIN_GAIN`` less than ``result``'s does: the two planes as the surfaces (the refined
+    ``MIN_GAIN`` less than ``result``'s does (and, for layers read on a comb's plane, by
+    at most ``COMB_FIT``): the two planes as the surfaces (the refined
     disparity kept where a pixel's layer and surface are unchanged, to half a pixel),
     Theta_1 and Theta_2 the planes in the cyclopean frame, phi ``PHI_SCALE`` times the
     signed distance along each row to the outline moved to the cyclopean frame, the
@@ -179,11 +232,12 @@ def on_layers(result, left, right, d_max):
     found = choose_layers(left, right, foreground, solved, d_max)
     if found is None:
         return None
-    mask, front, back, _ = found
+    mask, front, back, _, combed = found
     surface = np.where(mask, front, back)
     before = warp_cost(left, right, foreground, solved, UPSAMPLE)[0]
     after = warp_cost(left, right, mask, surface, UPSAMPLE)[0]
-    taken = bool(after < (1.0 - MIN_GAIN) * before and mask.any())
+    taken = bool(after < (1.0 - MIN_GAIN) * before and mask.any()
+                 and (not combed or after <= COMB_FIT))
     info = {"cost_before": before, "cost": after, "taken": taken,
             "front": float(np.median(front[mask])) if mask.any() else None,
             "back": float(np.median(back[~mask]))}

@@ -34,8 +34,8 @@ from .direction import box_sums
 from .validate import luma
 
 __all__ = ["FINE_STEP", "HIDDEN_COST", "MARGIN", "MIN_GAIN", "MIN_JUMP", "PEAK", "REFIT_RADIUS",
-           "STEP", "TOOTH_DEPTH", "UPSAMPLE", "choose_tooth", "on_tooth", "row_period",
-           "upsampled", "warp_cost"]
+           "STEP", "TOOTH_DEPTH", "TOOTH_PRECISION", "UPSAMPLE", "choose_tooth", "on_tooth",
+           "row_period", "upsampled", "warp_cost"]
 
 #: Step of the foreground offsets searched, left-view pixels.
 STEP = 0.25
@@ -62,6 +62,10 @@ TOOTH_DEPTH = 0.25
 #: Smallest median jump (left-view pixels) of a moved foreground over its background;
 #: as :data:`lss_kernels.checks.recovery.MIN_JUMP`.
 MIN_JUMP = 1.0
+#: Precision (left-view pixels) of a tooth's offset: on stripes of a few pixels a hundredth of
+#: a pixel off a tooth costs as much, summed over a layer, as the few pixels a row by which
+#: a wrong tooth's outline is off, so the offsets are refined beyond ``FINE_STEP``.
+TOOTH_PRECISION = 0.002
 #: Half the side of the square over which a pixel's differences are summed when a tooth's
 #: plane is fitted to the matches.
 REFIT_RADIUS = 2
@@ -324,8 +328,8 @@ def _teeth(left, right, inner, surface, lo, hi):
     """The offsets in ``[lo, hi]`` (not 0) at which the foreground's inside ``inner`` matches
     the right image best: the local minima over steps of ``STEP`` of the mean difference
     between the left image there and the (upsampled) right one at ``x - surface - s``,
-    refined to ``FINE_STEP``, those within ``TOOTH_DEPTH`` of the curve's range above the
-    lowest."""
+    refined to ``FINE_STEP`` and then to ``TOOTH_PRECISION`` (:func:`_golden`), those
+    within ``TOOTH_DEPTH`` of the curve's range above the lowest."""
     ys, xs = np.nonzero(inner)
     if xs.size == 0:
         return []
@@ -351,10 +355,31 @@ def _teeth(left, right, inner, surface, lo, hi):
         if np.isfinite(costs[i]) and left_ok and right_ok:
             fine = grid[i] + np.arange(-STEP, STEP + 1e-9, FINE_STEP)
             values = [cost(s) for s in fine]
-            minima.append((min(values), float(fine[int(np.argmin(values))])))
+            s = _golden(cost, float(fine[int(np.argmin(values))]))
+            minima.append((cost(s), s))
     floor, top = min(c for c, _ in minima), float(np.max(costs[np.isfinite(costs)]))
     return [s for c, s in minima
             if c <= floor + TOOTH_DEPTH * (top - floor)]
+
+
+def _golden(cost, s):
+    """The minimum of ``cost`` within ``FINE_STEP`` of ``s``, to ``TOOTH_PRECISION`` (golden
+    section; ``s`` itself when no point found is lower)."""
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    a, b = s - FINE_STEP, s + FINE_STEP
+    c, d = b - ratio * (b - a), a + ratio * (b - a)
+    fc, fd = cost(c), cost(d)
+    while b - a > TOOTH_PRECISION:
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - ratio * (b - a)
+            fc = cost(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + ratio * (b - a)
+            fd = cost(d)
+    best = c if fc < fd else d
+    return float(best) if min(fc, fd) < cost(s) else float(s)
 
 
 def _eroded(mask, n):
