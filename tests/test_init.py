@@ -453,9 +453,28 @@ def test_cli_auto_on_a_striped_background_prints_the_warning_and_records_it(tmp_
                                                    "image is periodic")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["init"]["warning"] == lines[0][len("lss solve: warning: "):]
-    # the periodic solve collapsed after 20 iterations and was solved again, from a start
-    # found again on the same image: still one line
-    assert summary["recovery"]["retried"]
+    # the layers read again from the pair (checks/comb.py, checks/outline.py) make the
+    # periodic solve sound: no retry
+    assert summary["recovery"]["collapse"] is None and not summary["recovery"]["retried"]
+
+
+def test_a_retried_auto_start_warns_once(ti_arch, monkeypatch):
+    # the first solve judged collapsed: the retry finds its start again on the same
+    # periodic image, and its warning is not repeated
+    from lss_kernels import Params, solve
+    from lss_kernels.checks import recovery
+    from lss_kernels.scenes import make_scene
+    from lss_kernels.start_types import UnreliableStartWarning
+    scene = make_scene("easy", seed=1, texture_bg={"kind": "stripes", "period": 6.0})
+    verdicts = iter(["judged collapsed by the test", None])
+    monkeypatch.setattr(recovery, "collapse", lambda health: next(verdicts))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = solve(scene.left, scene.right, scene.d_max, "auto",
+                       params=Params(max_iterations=20))
+    assert result.recovery["retried"] and result.recovery["kept"] == "retry"
+    starts = [w for w in caught if issubclass(w.category, UnreliableStartWarning)]
+    assert len(starts) == 1 and "periodic" in str(starts[0].message)
 
 
 def test_eval_with_init_from_the_true_box(tmp_path, fresh_taichi):
