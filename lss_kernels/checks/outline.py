@@ -33,8 +33,8 @@ from .comb import combs
 from .teeth import (HIDDEN_COST, MIN_GAIN, MIN_JUMP, UPSAMPLE, _coefficients, _eroded, _plane,
                     _sample, _teeth, plane_of, upsampled, warp_cost)
 
-__all__ = ["COMB_FIT", "INNER", "OUTER", "REACH", "ROUNDS", "choose_layers", "on_layers", "pixel_costs",
-           "row_outline"]
+__all__ = ["COMB_FIT", "INNER", "OUTER", "REACH", "ROUNDS", "choose_layers", "on_layers",
+           "pixel_costs", "row_outline"]
 
 #: Rounds of the search: each reads the teeth from the regions of the last round's outline.
 ROUNDS = 2

@@ -197,8 +197,8 @@ def choose_tooth(left, right, foreground, surface, d_max):
     info = {"offset": 0.0, "shift": 0, "shape": "solved"}
     if not foreground.any() or foreground.all() or foreground.shape != left.shape[:2]:
         return (0.0, 0, None), info
-    behind = row_period(left, _eroded(~foreground, 2))
     period = row_period(left, _eroded(foreground, 2))
+    behind = row_period(left, _eroded(~foreground, 2))
     info.update(period=period, background_period=behind)
     if period is None:
         return (0.0, 0, None), info
@@ -355,16 +355,17 @@ def _teeth(left, right, inner, surface, lo, hi):
         if np.isfinite(costs[i]) and left_ok and right_ok:
             fine = grid[i] + np.arange(-STEP, STEP + 1e-9, FINE_STEP)
             values = [cost(s) for s in fine]
-            s = _golden(cost, float(fine[int(np.argmin(values))]))
-            minima.append((cost(s), s))
+            k = int(np.argmin(values))
+            minima.append(_golden(cost, float(fine[k]), values[k]))
     floor, top = min(c for c, _ in minima), float(np.max(costs[np.isfinite(costs)]))
     return [s for c, s in minima
             if c <= floor + TOOTH_DEPTH * (top - floor)]
 
 
-def _golden(cost, s):
-    """The minimum of ``cost`` within ``FINE_STEP`` of ``s``, to ``TOOTH_PRECISION`` (golden
-    section; ``s`` itself when no point found is lower)."""
+def _golden(cost, s, at_s):
+    """``(value, offset)``: the minimum of ``cost`` within ``FINE_STEP`` of ``s`` (where it is
+    ``at_s``), to ``TOOTH_PRECISION`` (golden section; ``s`` itself when no point found is
+    lower)."""
     ratio = (np.sqrt(5.0) - 1.0) / 2.0
     a, b = s - FINE_STEP, s + FINE_STEP
     c, d = b - ratio * (b - a), a + ratio * (b - a)
@@ -378,8 +379,8 @@ def _golden(cost, s):
             a, c, fc = c, d, fd
             d = a + ratio * (b - a)
             fd = cost(d)
-    best = c if fc < fd else d
-    return float(best) if min(fc, fd) < cost(s) else float(s)
+    best, value = (c, fc) if fc < fd else (d, fd)
+    return (value, float(best)) if value < at_s else (at_s, float(s))
 
 
 def _eroded(mask, n):
