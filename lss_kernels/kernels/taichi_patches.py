@@ -11,6 +11,10 @@ answers it must build faster:
 * :func:`_fast_source_lines`: the ``textwrap`` wrapping of those two lines, which for a line
   that fits in the width only drops trailing spaces, and is the same for every node of a
   longer line (1.2 s of a paper15 solve's set-up on a busy 2-core CPU, ~27,000 wraps);
+* :func:`_lazy_field_tracebacks`: the text of the Python stack that Taichi keeps with every
+  field it creates, for an error message about a field that is never placed: it is built
+  when such a message reads it, not for each of the ~900 fields of a paper15 solve (about
+  0.3 s of every solve process);
 * :func:`_memoise_source_reading`: the source of a kernel or ``ti.func`` that Taichi reads with
   ``inspect`` and re-wraps with ``textwrap`` at every instance and call site (0.54 s of the
   front end's 1.6 s).
@@ -24,10 +28,14 @@ environment variable ``LSS_TAICHI_PATCHES=0`` before the first :func:`lss_kernel
 backend.init` to leave Taichi untouched.
 """
 import functools
+import linecache
 import os
+import sys
+import traceback
 import types
 
 from taichi.lang import kernel_impl as _kernel_impl
+from taichi.lang import impl as _impl
 from taichi.lang.ast import ast_transformer_utils as _ast_utils
 
 __all__ = ["enabled", "install"]
@@ -49,6 +57,7 @@ def install() -> bool:
     _memoise_source_positions()
     _fast_source_lines()
     _memoise_source_reading()
+    _lazy_field_tracebacks()
     return True
 
 
@@ -173,3 +182,74 @@ def _memoise_source_reading():
     _kernel_impl.getsourcelines = getsourcelines
     if isinstance(getattr(_kernel_impl, "textwrap", None), types.ModuleType):
         _kernel_impl.textwrap = _MemoisedTextwrap(_kernel_impl.textwrap)
+
+
+class _Traceback:
+    """The text of ``taichi.lang.util.get_traceback`` for a stack captured without reading
+    its source lines; the text is built, the same, when first read (``str``, ``format``)."""
+
+    __slots__ = ("_stack", "_text")
+
+    def __init__(self, stack):
+        self._stack = stack
+        self._text = None
+
+    def __str__(self):
+        if self._text is None:
+            # as traceback.extract_stack: the files' caches checked, then the lines read
+            for filename in {filename for filename, _, _ in self._stack}:
+                linecache.checkcache(filename)
+            summary = traceback.StackSummary.from_list(
+                [traceback.FrameSummary(filename, lineno, name, lookup_line=False)
+                 for filename, lineno, name in self._stack])
+            self._text = "".join(traceback.format_list(summary))
+        return self._text
+
+    def __format__(self, spec):
+        return format(str(self), spec)
+
+    def __repr__(self):
+        return repr(str(self))
+
+
+def _lazy_field_tracebacks():
+    """Capture the stack that Taichi's ``impl`` keeps with each field (and each fields
+    builder) as file names, line numbers and function names, and build its text only when an
+    error message reads it (:class:`_Traceback`).  Taichi formats the whole Python stack
+    (file names, source lines) for every field it creates, before it knows whether a field
+    will be left unplaced: ~900 times in a paper15 solve.  The text, when read, is Taichi's
+    own; the tracebacks that Taichi passes to its C++ core (``DebugInfo`` of SNodes and
+    ndarrays, read with their own ``get_traceback``) are untouched.  Skipped if this
+    Taichi's ``impl`` has no ``get_traceback`` or no ``PyTaichi._get_tb``, and for a stack
+    that ``sys.tracebacklimit`` would cut (Taichi's own function then runs)."""
+    read = getattr(_impl, "get_traceback", None)
+    runtime = getattr(_impl, "PyTaichi", None)
+    if read is None or getattr(read, "_lss_lazy", False) or \
+            not hasattr(runtime, "_get_tb"):
+        return
+
+    def get_traceback(stacklevel=1):
+        if getattr(sys, "tracebacklimit", None) is not None:
+            return read(stacklevel + 1)
+        try:
+            frame = sys._getframe(1 + stacklevel)
+        except ValueError:                  # a stack shorter than stacklevel: no frames
+            return ""
+        stack = []
+        while frame is not None:            # as traceback.walk_stack
+            code = frame.f_code
+            linecache.lazycache(code.co_filename, frame.f_globals)
+            stack.append((code.co_filename, frame.f_lineno, code.co_name))
+            frame = frame.f_back
+        stack.reverse()
+        return _Traceback(stack)
+
+    get_tb = runtime._get_tb
+
+    def _get_tb(var):                       # joined with "".join in an error message
+        return str(get_tb(var))
+
+    get_traceback._lss_lazy = True
+    get_traceback.original = read
+    _impl.get_traceback = get_traceback
+    runtime._get_tb = staticmethod(_get_tb)
