@@ -32,7 +32,7 @@ from .model import STAGES
 from .model.front import REACH as FRONT_REACH
 from .model.grid import Grid
 from .model.layers import FRONT, front_in_left_view, occlusion_by_layers
-from .model.offset import SHIFT, model_pair, search_range, to_user_left
+from .model.offset import SHIFT, model_pair, search_range, to_model_left, to_user_left
 from .params import PHI_SCALE, c_max
 from .confidence import of_solver
 from .result import Result
@@ -191,10 +191,12 @@ class Solver:
         """The initial foreground in the cyclopean frame
         (:func:`lss_kernels.model.start.initial_region`); also keeps it in the left view."""
         h = self.hierarchy
+        grey = to_model_left(self.pair.grey[0], self.shift)   # a point's tone (model/init.py)
 
         def find(start):
             region, frame = self.initialiser.find(start, h.consensus_mean, h.precision,
-                                                  periodic=self.pair.periodic_share)
+                                                  periodic=self.pair.periodic_share,
+                                                  image=grey)
             return region, frame, self.initialiser.info, self.initialiser.grown
 
         mask, self.initial_left, self.init_info = initial_region(

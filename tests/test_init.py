@@ -195,6 +195,53 @@ def test_a_point_grows_over_near_pixels_only(region):
     assert (region.label.to_numpy()[10:14] == 1).all()
 
 
+
+def _tone_case(region, precision):
+    """A seed region of 3x3 pixels inside a bright 8x10 rectangle of the left image seen at
+    the seed's depth (2 columns to the right of its cyclopean place), beside a bright strip
+    joined to it and a bright block apart."""
+    image = np.full((24, 40), 0.3)
+    image[6:14, 12:22] = 0.8                      # the object, cyclopean columns 10..19
+    image[9:11, 22:34] = 0.81                     # a strip that touches it
+    image[18:22, 30:38] = 0.8                     # a block apart
+    image += np.random.default_rng(0).normal(0.0, 0.004, image.shape)
+    labels = np.full((24, 40), -1, np.int32)
+    labels[9:12, 13:16] = 1
+    region.label.from_numpy(labels)
+    added = region._by_tone(10, 14, 2.0, image, precision)
+    return added, region.label.to_numpy() == 1
+
+
+def test_a_small_region_of_a_point_takes_the_connected_pixels_of_its_tone(region, monkeypatch):
+    """Too small a region of d-bar (MIN_AREA) takes every 4-connected pixel of the seed's
+    grey value, read at the seed's depth, whatever its precision."""
+    from lss_kernels.model import init
+    monkeypatch.setattr(init, "MIN_AREA", 0.05)   # 48 pixels: the 3x3 seed region is small
+    region.info = {}
+    area, got = _tone_case(region, np.ones((24, 40)))
+    want = np.zeros((24, 40), bool)
+    want[6:14, 10:20] = True
+    want[9:11, 20:32] = True
+    np.testing.assert_array_equal(got, want)
+    assert area == want.sum() and region.info["tone"]["why"] == "the region of d-bar is small"
+
+
+def test_an_uncertain_seed_takes_the_uncertain_pixels_of_its_tone_only(region):
+    """A region that is large enough but whose seed's d-bar is uncertain (precision below
+    UNCERTAIN of the median) takes the uncertain pixels of its tone: not the strip, whose
+    d-bar is certain; a certain seed keeps its region as it is."""
+    precision = np.ones((24, 40))
+    precision[6:14, 10:20] = 0.01
+    region.info = {}
+    area, got = _tone_case(region, precision)
+    want = np.zeros((24, 40), bool)
+    want[6:14, 10:20] = True
+    np.testing.assert_array_equal(got, want)
+    assert region.info["tone"]["why"] == "the seed's d-bar is uncertain"
+    region.info = {}
+    area, got = _tone_case(region, np.ones((24, 40)))
+    assert area == 9 and got.sum() == 9 and "tone" not in region.info
+
 @pytest.fixture(scope="module")
 def easy(ti_arch):
     from lss_kernels.scenes import make_scene
@@ -565,3 +612,32 @@ def ndimage_dilate(mask, radius):
             yy, xx = np.clip(ys + dy, 0, mask.shape[0] - 1), np.clip(xs + dx, 0, mask.shape[1] - 1)
             out[yy, xx] = True
     return out
+
+
+def _weak_object_scene():
+    """A uniform mid-grey L (a few grey levels of texture) over a textured background: its
+    d-bar is noise, as a uniform surface matches at every shift along itself."""
+    from lss_kernels.scenes import make_scene
+    return make_scene("easy", seed=3, width=192, height=144, outline="L", noise=2 / 255,
+                      texture_fg={"kind": "low_contrast", "brightness": 0.6,
+                                  "amplitude": 4 / 255, "tint": 0.0})
+
+
+def test_a_click_on_a_weakly_textured_object_starts_from_most_of_it(ti_arch):
+    """The region of d-bar under the click is a fragment of a uniform object (or too small
+    to be a start: half the L); the pixels of the click's tone at its depth join it."""
+    from lss_kernels import Params, Solver
+    from lss_kernels.scenes import _deepest_pixel
+    backend.restart()
+    scene = _weak_object_scene()
+    x, y = _deepest_pixel(scene.fg_left)
+    solver = Solver(scene.left, scene.right, scene.d_max, Point(x, y),
+                    params=Params(max_iterations=1))
+    try:
+        start, info = solver.initial_left, solver.init_info
+    finally:
+        solver.close()
+    fg = scene.fg_left
+    assert (start & fg).sum() >= 0.75 * fg.sum()
+    assert (start & ~fg).sum() <= 0.1 * fg.sum()      # the start's spill, no more
+    assert info["tone"]["added"] > 0

@@ -15,7 +15,14 @@ and removes stray matches.  Then:
   ``BAND`` times the seed's d-bar, at least ``BAND_MIN``) and within the same of a
   neighbour's (a depth-coherent flood fill): over the near pixels when the seed is one of
   them (the band alone would run along a table at the object's depth), else over every
-  pixel (an object wider than ``L``, or one beside a nearer one);
+  pixel (an object wider than ``L``, or one beside a nearer one).  A weakly textured object
+  has no d-bar to follow: where that region is smaller than ``MIN_AREA`` of the image, or
+  where most of the seed's 7x7 window is *uncertain* (precision below ``UNCERTAIN`` of the
+  image's median), the region also takes the 4-connected pixels of the seed's *tone*: the
+  left image's grey value at the seed's depth within ``TONE_SPREAD`` robust deviations
+  (at least ``TONE_MIN``) of the median of the seed's window; only the uncertain ones, in
+  the second case.  The object's own matches then set its depth in the evolution, which
+  the d-bar of a uniform surface could not;
 * ``Box(x0, y0, x1, y1)``: the region of ``Point`` at the box's centre, cut to the box
   (moved to the cyclopean frame by the seed's d-bar); the ellipse inscribed in the box
   (``BOX_SPILL``) when the centre has no confident match, when its region in the box is
@@ -86,6 +93,10 @@ NEST_AREA = 0.2          # auto: a candidate over this fraction of the image is 
 NEST_CONTRAST = 2.0      # ... for pixels this far above its own quadratic (cyclopean px)
 NEST_SHARE = 0.05        # ... forming a candidate of at least this fraction of it
 MAX_ROUNDS = 4096        # propagation launches before a region is taken as it stands
+UNCERTAIN = 1.0 / 16.0   # a point's tone: d-bar uncertain below this share of the median
+                         # precision (its deviation 4 times the median's)
+TONE_SPREAD = 3.0        # ... the seed's tone: within this many robust deviations of the
+TONE_MIN = 0.03          # ... median grey of its 7x7 window, and at least this (grey, 0-1)
 
 
 
@@ -387,7 +398,7 @@ class InitialRegion:
                 return rounds
         return MAX_ROUNDS
 
-    def find(self, init, mean, precision, periodic: float = 0.0) -> tuple:
+    def find(self, init, mean, precision, periodic: float = 0.0, image=None) -> tuple:
         """The initial region for ``init`` (``"auto"``, :class:`Point` or :class:`Box`) as
         ``(ellipse, "left")`` for a box whose centre gives no region, else
         ``(mask, "cyclopean")``, an ``(H, W)`` boolean
@@ -396,13 +407,19 @@ class InitialRegion:
         ``mean`` and ``precision`` are the first consensus (cyclopean pixels); ``periodic``
         the share of the left image's tiles that are periodic when the image counts as
         periodic (:mod:`lss_kernels.checks.periodicity`), else 0: a box's start then ignores the
-        consensus, and ``auto`` records a warning in :attr:`info` (the caller issues it)."""
+        consensus, and ``auto`` records a warning in :attr:`info` (the caller issues it).
+        ``image``: the left view's grey values ``(H, W)`` in [0, 1] (the model's frame), for
+        a point's tone; None: a point's region follows d-bar only."""
         self.load(mean, precision)
         self.smooth()
         self.mark_near(max(int(WINDOW * self.W), 1), CONTRAST)
         if isinstance(init, Box):
             return self._box(init, periodic)
-        mask = self._point(init) if isinstance(init, Point) else self._auto()
+        if isinstance(init, Point):
+            tone = None if image is None else (image, precision.to_numpy()[:self.H, :self.W])
+            mask = self._point(init, tone)
+        else:
+            mask = self._auto()
         self.info["area"] = int(mask.sum())
         if init == AUTO:
             self.info["periodic"] = periodic
@@ -481,7 +498,9 @@ class InitialRegion:
         surface = _basis(*np.mgrid[0:self.H, 0:self.W][::-1], self.H, self.W) @ inner
         return sub, near & (d - surface > CONTRAST)
 
-    def _point(self, point):
+    def _point(self, point, tone=None):
+        """The region of ``point`` (the module text), widened; ``tone``: ``(image,
+        precision)`` as :meth:`_by_tone` takes them, for a point's region also of its tone."""
         H, W = self.H, self.W
         d = self.pool.read(self.d)
         y, xc = (min(max(int(round(v)), 0), n - 1) for v, n in ((point.y, H), (point.x, W)))
@@ -503,6 +522,8 @@ class InitialRegion:
                      "seed_disparity": 2.0 * seed_d, "band_px": 2.0 * band,
                      "over": "near pixels" if near else "all pixels", "found": found,
                      "rounds": rounds, "spill": SPILL, "spill_left": SPILL_LEFT}
+        if tone is not None:
+            found = self._by_tone(y, xc, seed_d, *tone)
         if self.bridge_gap > 0:
             self.info["bridge_px"] = 2 * self.bridge_gap
         if found < MIN_AREA * H * W:
@@ -510,6 +531,41 @@ class InitialRegion:
                             f"{found} pixels, fewer than {MIN_AREA:.1%} of the "
                             f"image: no object found there")
         return self._widened(SPILL, SPILL_LEFT)
+
+    def _by_tone(self, y, xc, seed_d, image, precision) -> int:
+        """The point's region (label 1) joined, when it is small or its seed uncertain (the
+        module text), by the 4-connected pixels of the seed's tone; returns its area and
+        records the tone in :attr:`info`.  ``image``: the left view's grey values, ``(H,
+        W)``; ``precision``: the first consensus's, ``(H, W)`` (cyclopean frame)."""
+        H, W = self.H, self.W
+        region = self.pool.read(self.label) == 1
+        window = np.s_[max(y - 3, 0):y + 4, max(xc - 3, 0):xc + 4]
+        known = precision[precision > 0]
+        uncertain = precision < UNCERTAIN * (float(np.median(known)) if known.size else 0.0)
+        small = region.sum() < MIN_AREA * H * W
+        if not small and not uncertain[window].mean() > 0.5:
+            return int(region.sum())
+        # the grey value of the left pixel that each cyclopean pixel shows at the seed's
+        # depth (x_left = x_c + c)
+        columns = np.clip(np.round(np.arange(W) + seed_d).astype(int), 0, W - 1)
+        grey = np.asarray(image, np.float64)[:, columns]
+        median = float(np.median(grey[window]))
+        spread = 1.4826 * float(np.median(np.abs(grey[window] - median)))
+        tolerance = max(TONE_MIN, TONE_SPREAD * spread)
+        alike = np.abs(grey - median) <= tolerance
+        if not small:
+            alike &= uncertain
+        index = np.arange(H * W, dtype=np.int32).reshape(H, W)
+        self.pool.write(self.label, np.where(region | alike, index, -1).astype(np.int32))
+        self.until_stable(self.propagate)
+        labels = self.pool.read(self.label)
+        joined = (labels == labels[y, xc]) if labels[y, xc] >= 0 else region
+        self.pool.write(self.label, np.where(joined, 1, -1).astype(np.int32))
+        self.info["tone"] = {"why": ("the region of d-bar is small" if small else
+                                     "the seed's d-bar is uncertain"),
+                             "grey": median, "tolerance": tolerance,
+                             "added": int((joined & ~region).sum())}
+        return int(joined.sum())
 
     def _auto(self):
         labels = self.pool.read(self.label)
