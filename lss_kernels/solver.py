@@ -37,7 +37,7 @@ from .params import PHI_SCALE, c_max
 from .confidence import of_solver
 from .result import Result
 from .model.start import initial_region
-from .start_types import UnreliableStartWarning
+from .start_types import Point, UnreliableStartWarning
 from .stopping import StopRule
 
 __all__ = ["Result", "Solver"]
@@ -191,17 +191,20 @@ class Solver:
         """The initial foreground in the cyclopean frame
         (:func:`lss_kernels.model.start.initial_region`); also keeps it in the left view."""
         h = self.hierarchy
-        grey = to_model_left(self.pair.grey[0], self.shift)   # a point's tone (model/init.py)
+        precision = self.extent.image(h.precision)
+        # a point's tone (model/init.py): the left view's grey values in the model's frame
+        tone = ((to_model_left(self.pair.grey[0], self.shift), precision)
+                if isinstance(init, Point) else None)
 
         def find(start):
             region, frame = self.initialiser.find(start, h.consensus_mean, h.precision,
                                                   periodic=self.pair.periodic_share,
-                                                  image=grey)
+                                                  tone=tone)
             return region, frame, self.initialiser.info, self.initialiser.grown
 
         mask, self.initial_left, self.init_info = initial_region(
-            init, init_frame, self.shift, self.extent.image(h.consensus_mean),
-            self.extent.image(h.precision), find, self.params.refine_ellipse)
+            init, init_frame, self.shift, self.extent.image(h.consensus_mean), precision,
+            find, self.params.refine_ellipse)
         if "warning" in self.init_info:
             warnings.warn(UnreliableStartWarning(self.init_info["warning"]), stacklevel=4)
         return mask

@@ -412,7 +412,7 @@ class InitialRegion:
                 return rounds
         return MAX_ROUNDS
 
-    def find(self, init, mean, precision, periodic: float = 0.0, image=None) -> tuple:
+    def find(self, init, mean, precision, periodic: float = 0.0, tone=None) -> tuple:
         """The initial region for ``init`` (``"auto"``, :class:`Point` or :class:`Box`) as
         ``(ellipse, "left")`` for a box whose centre gives no region, else
         ``(mask, "cyclopean")``, an ``(H, W)`` boolean
@@ -422,18 +422,15 @@ class InitialRegion:
         the share of the left image's tiles that are periodic when the image counts as
         periodic (:mod:`lss_kernels.checks.periodicity`), else 0: a box's start then ignores the
         consensus, and ``auto`` records a warning in :attr:`info` (the caller issues it).
-        ``image``: the left view's grey values ``(H, W)`` in [0, 1] (the model's frame), for
-        a point's tone; None: a point's region follows d-bar only."""
+        ``tone``: ``(image, precision)``, the left view's grey values in [0, 1] (the model's
+        frame) and ``precision`` on the host, both ``(H, W)``, for a point's tone
+        (:meth:`_by_tone`); None: a point's region follows d-bar only."""
         self.load(mean, precision)
         self.smooth()
         self.mark_near(max(int(WINDOW * self.W), 1), CONTRAST)
         if isinstance(init, Box):
             return self._box(init, periodic)
-        if isinstance(init, Point):
-            tone = None if image is None else (image, precision.to_numpy()[:self.H, :self.W])
-            mask = self._point(init, tone)
-        else:
-            mask = self._auto()
+        mask = self._point(init, tone) if isinstance(init, Point) else self._auto()
         self.info["area"] = int(mask.sum())
         if init == AUTO:
             self.info["periodic"] = periodic
