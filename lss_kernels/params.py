@@ -206,6 +206,7 @@ class Params:
     refine_ellipse: bool = True
     front_margin: float = 0.0
     local_background: int = 0
+    appearance: float = 0.0
 
     def __post_init__(self):
         self.validate()
@@ -268,6 +269,7 @@ class Params:
         need("front_margin", nonneg, "a finite number of pixels >= 0 (0: two layers)")
         need("local_background", lambda v: isinstance(v, int) and not isinstance(v, bool)
              and 0 <= v <= 8, "an integer in [0, 8] (0: one global Theta_2)")
+        need("appearance", nonneg, "a finite weight >= 0 (0: no appearance term)")
 
     @classmethod
     def paper(cls, **changes) -> "Params":
