@@ -86,7 +86,7 @@ class Solver:
                  profile=False):
         t_start = time.perf_counter()
         backend.before_solver(arch)
-        self.params = check_params(params)
+        self.params = check_params(params).for_start(init)
         pair = CheckedPair.of(left, right, d_max, init, init_frame, self.params)
         self.H, self.W = pair.left.shape[:2]
         self.profile = profile

@@ -61,3 +61,28 @@ def test_appearance_weight_is_validated():
         Params(appearance=-0.1)
     with pytest.raises(ValueError, match="appearance"):
         Params(appearance=float("nan"))
+
+
+def test_a_clicked_weak_object_is_solved_with_the_colour_term(ti_arch):
+    """A click starts the colour term (Params.appearance None -> APPEARANCE); a uniform
+    mid-grey L over a textured background, whose matches are noise, is still found whole,
+    with its occlusion."""
+    from lss_kernels import Point, Solver
+    from lss_kernels.metrics import score
+    from lss_kernels.params import APPEARANCE
+    from lss_kernels.scenes import _deepest_pixel, make_scene
+    scene = make_scene("easy", seed=3, width=192, height=144, outline="L", noise=2 / 255,
+                       texture_fg={"kind": "low_contrast", "brightness": 0.6,
+                                   "amplitude": 4 / 255, "tint": 0.0})
+    x, y = _deepest_pixel(scene.fg_left)
+    solver = Solver(scene.left, scene.right, scene.d_max, Point(x, y))
+    try:
+        assert solver.params.appearance == APPEARANCE and solver.appearance is not None
+        result = solver.run()
+        term = solver.extent.image(solver.levelset.appearance)
+    finally:
+        solver.close()
+    fg, truth = result.foreground, scene.fg_left
+    assert (fg & truth).sum() >= 0.9 * (fg | truth).sum()
+    assert score(result.disparity, result.occlusion, scene)["occ_f1"] >= 0.9
+    assert np.count_nonzero(term) > 0

@@ -58,7 +58,7 @@ class Grid:
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, p)
         self.front = FrontLayer(pool, H, W) if p.front_margin > 0 else None
-        self.appearance = Appearance(pool, H, W) if p.appearance > 0 else None
+        self.appearance = Appearance(pool, H, W) if p.appearance else None
         if self.front is not None:
             self.levelset.hidden = self.front.hidden
             self.initialiser.bridge_gap = BRIDGE_GAP

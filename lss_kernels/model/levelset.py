@@ -137,7 +137,7 @@ class LevelSet:
         if self.has_hidden:
             self.data, self.force = f(), f()
         # the layers' colour term (lss_kernels.model.appearance), refreshed by its stage
-        self.has_appearance = params.appearance > 0
+        self.has_appearance = bool(params.appearance)
         if self.has_appearance:
             self.appearance = f()
 
