@@ -82,19 +82,20 @@ class GaussianFilters:
                         for _ in range(3)]
 
     @ti.func
-    def _taps(self, before, after, i: ti.template(), order: ti.template()):
+    def _taps(self, before: ti.template(), after: ti.template(), i: ti.template(),
+              order: ti.template()):
         """Taps +-i of the derivative of ``order``: w_i (before + after) for the even orders,
         w_i (before - after) for the odd one (``before`` = src at pos - i, ``after`` at
         pos + i).  The taps are compile-time constants, and each pair of samples is read
-        once for all orders."""
+        once for all orders (templates: not copied for each order and tap)."""
         w = ti.static(float(self.tap_values[order][self.half + i]))
-        value = w * (before + after)
         if ti.static(order == 1):
-            value = w * (before - after)
-        return value
+            return w * (before - after)
+        else:
+            return w * (before + after)
 
     @ti.func
-    def _shifted(self, window, i: ti.template()):
+    def _shifted(self, window: ti.template(), i: ti.template()):
         """The block's pixels moved by ``i``, from its filter window."""
         return lanes.take(window, ti.static(self.half + i), self.lanes)
 

@@ -292,7 +292,7 @@ class _BucketTree:
         return v
 
     @ti.func
-    def _descend(self, yb, t, held, node: ti.template()):
+    def _descend(self, yb, t, held: ti.template(), node: ti.template()):
         """A node of the tile's tree below the root (see :func:`median_network`): merge its
         new columns with the parent's survivors ``held``; store the medians of a block's
         rows at a leaf, else pass the survivors on to the children."""
@@ -318,8 +318,9 @@ class _BucketTree:
             return self._gather(v, pre[2])
 
     @ti.func
-    def _gather(self, v, positions: ti.template()):
-        """The entries of ``v`` at ``positions``, as a new list."""
+    def _gather(self, v: ti.template(), positions: ti.template()):
+        """The entries of ``v`` at ``positions``, as a new list (``v`` a template: not
+        copied whole for each node of the tree)."""
         return [v[i] for i in ti.static(positions)]
 
     @ti.kernel
