@@ -302,15 +302,14 @@ class PatchHierarchy:
 
     # ------------------------------------------------------------------ upward, per iteration
     @ti.func
-    def _shifted(self, plane: ti.template(), y, b, o: ti.template(), span: ti.template(),
-                 blocks):
+    def _shifted(self, plane: ti.template(), y: ti.template(), b: ti.template(),
+                 o: ti.template(), span: ti.template(), blocks: ti.template()):
         """Centres ``b L + o .. b L + o + L - 1`` of row ``y`` of a level's lane plane (``o``
         a compile-time offset): one or two whole blocks, their lanes moved by ``o mod L``.
         With a ``span`` (a parent's ``columns``, which end before its child's; ``()``:
-        none), blocks outside it read as zeros: no patch there relays anything."""
-        L = ti.static(self.lanes)
-        q = ti.static(o // L)
-        r = ti.static(o % L)
+        none), blocks outside it read as zeros: no patch there relays anything.  The
+        indices are templates, not copied at each of its hundreds of inlined calls."""
+        q, r = ti.static(divmod(o, self.lanes))
         value = self._block(plane, y, b + q, span, blocks)
         if ti.static(r != 0):
             value = self._merge_lanes(value, self._block(plane, y, b + q + 1, span, blocks), r)
