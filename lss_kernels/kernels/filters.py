@@ -95,7 +95,7 @@ class GaussianFilters:
         for the even orders, w_i (before - after) for the odd one (``before`` = src at
         pos - i, ``after`` at pos + i).  The taps are compile-time constants, and each pair
         of samples is read once for all orders (one call per tap, not per tap and order:
-        the front end visits a fifth of the nodes)."""
+        the front end visits 40% fewer nodes for a filter pass)."""
         pair = [before + after, before - after]
         for j, w, odd in ti.static(self._weights(orders, i)):
             out[j] += w * pair[odd]

@@ -67,8 +67,8 @@ def columns(b, lanes: ti.template()):
 def take(window: ti.template(), start: ti.template(), lanes: ti.template()):
     """Entries ``start .. start + lanes - 1`` of a local vector (a block's window) as a
     block: a block moved by a compile-time offset within the window it was read from.
-    The window is a template, not copied at each call: the front end visits a third of
-    the nodes (this runs some 2,000 times in a solver's kernels)."""
+    The window is a template, not copied at each call: the front end visits a quarter
+    fewer nodes."""
     return ti.Vector([window[i] for i in ti.static(range(start, start + lanes))])
 
 
