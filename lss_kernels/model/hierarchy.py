@@ -331,8 +331,8 @@ class PatchHierarchy:
     @ti.func
     def _merge_lanes(self, first: ti.template(), second: ti.template(), r: ti.template()):
         """Lanes ``r .. L - 1`` of ``first`` followed by lanes ``0 .. r - 1`` of
-        ``second`` (templates, not copies: the front end visits a third of the nodes of
-        building the vector from a list of the two)."""
+        ``second`` (templates, not copies, read lane by lane without a list of the two to
+        index: the front end visits a third of the nodes)."""
         L = ti.static(self.lanes)
         return ti.Vector([first[l] for l in ti.static(range(r, L))]
                          + [second[l] for l in ti.static(range(r))])
