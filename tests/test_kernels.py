@@ -563,6 +563,50 @@ def test_median_network_selects_the_medians_of_a_tile_of_windows(k):
             assert medians[j] == np.median(block[:, j:j + k])
 
 
+@pytest.mark.parametrize("k", [3, 5, 7])
+def test_median_runs_and_sources_replay_the_networks(k):
+    """The kernels run a network's ops by runs of one kind (``_runs``) and load its slots
+    from a table (``_sources``): the same values as the ops and slots themselves, for every
+    network of the tree and the column sort."""
+    from lss_kernels.kernels.median import _runs, _sources, median_network
+    column_ops, _, root = median_network(k)
+    networks = [(tuple(range(1 + max(max(op[1:3]) for op in column_ops))), column_ops)]
+
+    def collect(node):
+        _, pre, slots, ops, _, children, _ = node
+        if pre:
+            networks.append((pre[0], pre[1]))
+        networks.append((slots, ops))
+        for child in children:
+            collect(child)
+
+    collect(root)
+    rng = np.random.default_rng(3)
+    for slots, ops in networks:
+        n_runs = 1 + max((s[0] for s in slots if isinstance(s, tuple)), default=0)
+        runs = [list(rng.standard_normal(k * k)) for _ in range(n_runs)]
+        if isinstance(slots[0], int):                    # the column sort: plain values
+            expected = list(rng.standard_normal(len(slots)))
+            loaded = list(expected)
+        else:
+            expected = [-np.inf if s == "lo" else np.inf if s == "hi" else runs[s[0]][s[1]]
+                        for s in slots]
+            sources = runs + [[-np.inf, np.inf]]
+            loaded = [sources[run][rank] for run, rank in _sources(slots, n_runs)]
+        assert loaded == expected
+        replayed = list(loaded)
+        for kind, pairs in _runs(ops):
+            for a, b in pairs:
+                lo, hi = min(replayed[a], replayed[b]), max(replayed[a], replayed[b])
+                if kind == "swap":
+                    replayed[a], replayed[b] = replayed[b], replayed[a]
+                if kind in ("both", "min"):
+                    replayed[a] = lo
+                if kind in ("both", "max"):
+                    replayed[b] = hi
+        assert replayed == _run_ops(list(expected), ops)
+
+
 @pytest.mark.parametrize("k", [1, 7])
 def test_settle_counts_sign_flips_and_writes_eq3(ti_arch, k):
     """``LevelSet.settle``: phi = median(phi_next); ``flipped`` counts the pixels whose sign

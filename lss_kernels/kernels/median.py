@@ -131,6 +131,28 @@ def _merge_network(lengths, ranks):
     return tuple(slots[p] for p in used), ops, tuple(new[p] for p in positions)
 
 
+def _runs(ops):
+    """``ops`` (see :func:`median_network`) as runs of consecutive ops of one kind,
+    ``(kind, ((a, b), ...))`` in order: ``"swap"``, ``"both"`` (a comparator whose minimum
+    and maximum are both kept), ``"min"`` or ``"max"`` (only one kept)."""
+    runs = []
+    for op, a, b, keep_min, keep_max in ops:
+        kind = op if op == "swap" else ("both" if keep_min and keep_max else
+                                        ("min" if keep_min else "max"))
+        if runs and runs[-1][0] == kind:
+            runs[-1][1].append((a, b))
+        else:
+            runs.append((kind, [(a, b)]))
+    return tuple((kind, tuple(pairs)) for kind, pairs in runs)
+
+
+def _sources(slots, n_runs):
+    """Where each of a merge network's ``slots`` starts: ``(run, rank)``, the padding as
+    rank 0 (-inf) or 1 (+inf) of a run ``n_runs`` past the sorted ones."""
+    return tuple((n_runs, 0) if slot == "lo" else (n_runs, 1) if slot == "hi" else slot
+                 for slot in slots)
+
+
 def median_network(k):
     """Selection networks for the medians of a tile of ``tile`` horizontally adjacent
     ``k x k`` windows (``k`` odd; ``tile`` 4, or 2 for ``k = 3``), sharing work between the
@@ -255,17 +277,22 @@ class _BucketTree:
 
     @ti.func
     def apply(self, v: ti.template(), ops: ti.template()):
-        """Run a network's ``ops`` on the local vector ``v``, in place."""
-        for op, a, b, keep_min, keep_max in ti.static(ops):
-            if ti.static(op == "swap"):
-                v[a], v[b] = v[b], v[a]
+        """Run a network's ``ops`` on the local vector ``v``, in place, by runs of one kind
+        (:func:`_runs`): the front end tells the kinds apart once per run, not for every
+        comparator (a third fewer nodes)."""
+        for kind, pairs in ti.static(_runs(ops)):
+            if ti.static(kind == "swap"):
+                for a, b in ti.static(pairs):
+                    v[a], v[b] = v[b], v[a]
+            elif ti.static(kind == "both"):
+                for a, b in ti.static(pairs):
+                    v[a], v[b] = ti.min(v[a], v[b]), ti.max(v[a], v[b])
+            elif ti.static(kind == "min"):
+                for a, b in ti.static(pairs):
+                    v[a] = ti.min(v[a], v[b])
             else:
-                lo = ti.min(v[a], v[b])
-                hi = ti.max(v[a], v[b])
-                if ti.static(keep_min):
-                    v[a] = lo
-                if ti.static(keep_max):
-                    v[b] = hi
+                for a, b in ti.static(pairs):
+                    v[b] = ti.max(v[a], v[b])
 
     @ti.func
     def _column(self, yb, t, c: ti.template()):
@@ -279,20 +306,14 @@ class _BucketTree:
     @ti.func
     def _load(self, slots: ti.template(), runs: ti.template()):
         """The initial values of a merge network, each a vector over a block's rows: padding
-        as -+1e30, ``(run, rank)`` from the sorted ``runs``."""
+        as -+1e30, ``(run, rank)`` from the sorted ``runs`` (:func:`_sources`)."""
         L = ti.static(self.lanes)
-        v = [ti.Vector.zero(ti.f32, L) for _ in ti.static(range(len(slots)))]
-        for i in ti.static(range(len(slots))):
-            if ti.static(slots[i] == "lo"):
-                v[i] = ti.Vector([-1e30 for _ in ti.static(range(L))])
-            elif ti.static(slots[i] == "hi"):
-                v[i] = ti.Vector([1e30 for _ in ti.static(range(L))])
-            else:
-                v[i] = runs[ti.static(slots[i][0])][ti.static(slots[i][1])]
-        return v
+        padding = [ti.Vector([-1e30] * L), ti.Vector([1e30] * L)]
+        sources = ti.static(runs + [padding])
+        return [sources[run][rank] for run, rank in ti.static(_sources(slots, len(runs)))]
 
     @ti.func
-    def _descend(self, yb, t, held, node: ti.template()):
+    def _descend(self, yb, t, held: ti.template(), node: ti.template()):
         """A node of the tile's tree below the root (see :func:`median_network`): merge its
         new columns with the parent's survivors ``held``; store the medians of a block's
         rows at a leaf, else pass the survivors on to the children."""
@@ -318,8 +339,9 @@ class _BucketTree:
             return self._gather(v, pre[2])
 
     @ti.func
-    def _gather(self, v, positions: ti.template()):
-        """The entries of ``v`` at ``positions``, as a new list."""
+    def _gather(self, v: ti.template(), positions: ti.template()):
+        """The entries of ``v`` at ``positions``, as a new list (``v`` a template: not
+        copied whole for each node of the tree)."""
         return [v[i] for i in ti.static(positions)]
 
     @ti.kernel

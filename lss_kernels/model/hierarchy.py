@@ -302,15 +302,14 @@ class PatchHierarchy:
 
     # ------------------------------------------------------------------ upward, per iteration
     @ti.func
-    def _shifted(self, plane: ti.template(), y, b, o: ti.template(), span: ti.template(),
-                 blocks):
+    def _shifted(self, plane: ti.template(), y: ti.template(), b: ti.template(),
+                 o: ti.template(), span: ti.template(), blocks: ti.template()):
         """Centres ``b L + o .. b L + o + L - 1`` of row ``y`` of a level's lane plane (``o``
         a compile-time offset): one or two whole blocks, their lanes moved by ``o mod L``.
         With a ``span`` (a parent's ``columns``, which end before its child's; ``()``:
-        none), blocks outside it read as zeros: no patch there relays anything."""
-        L = ti.static(self.lanes)
-        q = ti.static(o // L)
-        r = ti.static(o % L)
+        none), blocks outside it read as zeros: no patch there relays anything.  The
+        indices are templates, not copied at each of its hundreds of inlined calls."""
+        q, r = ti.static(divmod(o, self.lanes))
         value = self._block(plane, y, b + q, span, blocks)
         if ti.static(r != 0):
             value = self._merge_lanes(value, self._block(plane, y, b + q + 1, span, blocks), r)
@@ -320,22 +319,23 @@ class PatchHierarchy:
     def _block(self, plane: ti.template(), y, b, span: ti.template(), blocks):
         """Block ``b`` of row ``y``; with a ``span`` (not ``()``), zeros outside its
         columns (``blocks``: the image's blocks of a row)."""
-        L = ti.static(self.lanes)
-        value = ti.Vector.zero(ti.f32, L)
         if ti.static(len(span) == 0):
             value = plane[y, b]
-        elif -ti.static(span[0]) <= b < blocks + ti.static(span[1]):
-            value = plane[y, b]
-        return value
+            return value
+        else:
+            value = ti.Vector.zero(ti.f32, self.lanes)
+            if -ti.static(span[0]) <= b < blocks + ti.static(span[1]):
+                value = plane[y, b]
+            return value
 
     @ti.func
-    def _merge_lanes(self, first, second, r: ti.template()):
+    def _merge_lanes(self, first: ti.template(), second: ti.template(), r: ti.template()):
         """Lanes ``r .. L - 1`` of ``first`` followed by lanes ``0 .. r - 1`` of
-        ``second``."""
+        ``second`` (templates, not copies, read lane by lane without a list of the two to
+        index: the front end visits a third of the nodes)."""
         L = ti.static(self.lanes)
-        pair = [first, second]
-        return ti.Vector([pair[ti.static((r + l) // L)][ti.static((r + l) % L)]
-                          for l in ti.static(range(L))])
+        return ti.Vector([first[l] for l in ti.static(range(r, L))]
+                         + [second[l] for l in ti.static(range(r))])
 
     @ti.func
     def _window(self, src: ti.template(), y, x0, lo: ti.template(), hi: ti.template(),
