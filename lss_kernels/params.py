@@ -26,6 +26,8 @@ def c_max(d_max) -> int:
 # (lss_kernels.model.costs); the refinement's peak-ratio and support thresholds
 # (lss_kernels.model.refine).
 
+#: The colour term's weight for a point's start (``Params.appearance`` None).
+APPEARANCE = 0.06
 #: phi is a signed distance (in pixels) times this factor (the release: 0.01).
 PHI_SCALE = 0.01
 #: Sigma (pixels) of the Gaussian-derivative filters for the curvature and the normal.
@@ -176,6 +178,12 @@ class Params:
         is the blend of the quadratics fitted to the background around the nearby tiles,
         pulled towards the global fit where they hold little background.  0: the paper's
         one global quadratic.
+    appearance : float or None
+        Weight of the layers' colour term in Eq. 2 (:mod:`lss_kernels.model.appearance`):
+        where the matches are uncertain, a pixel leans to the layer whose colours it has.
+        None: ``APPEARANCE`` for a point's start (one object clicked among many, whose
+        neighbours the colours tell apart), 0 for any other; the solver resolves it when it
+        is built.  0: the paper's data term alone.
     """
 
     dt: float = 0.2
@@ -206,6 +214,7 @@ class Params:
     refine_ellipse: bool = True
     front_margin: float = 0.0
     local_background: int = 0
+    appearance: float | None = None
 
     def __post_init__(self):
         self.validate()
@@ -268,6 +277,9 @@ class Params:
         need("front_margin", nonneg, "a finite number of pixels >= 0 (0: two layers)")
         need("local_background", lambda v: isinstance(v, int) and not isinstance(v, bool)
              and 0 <= v <= 8, "an integer in [0, 8] (0: one global Theta_2)")
+        need("appearance", lambda v: v is None or nonneg(v),
+             "None (a point's start: APPEARANCE; any other: 0) or a finite weight >= 0 "
+             "(0: no colour term)")
 
     @classmethod
     def paper(cls, **changes) -> "Params":
@@ -283,7 +295,15 @@ class Params:
             "matching_cost": "ad", "narrow_band": 0.0, "subpixel_messages": False,
             "background_sweep": 0.0, "refine_ellipse": False, "refine": False,
             "strip_window": (0, 0), "photometric": False, "recover": False,
-            "zero_floor": False, "message_ambiguity": 0.0, **changes})
+            "zero_floor": False, "message_ambiguity": 0.0, "appearance": 0.0, **changes})
+
+    def for_start(self, init) -> "Params":
+        """These parameters with ``appearance`` resolved for the start ``init``: None is
+        ``APPEARANCE`` for a :class:`~lss_kernels.Point`, 0 for any other start."""
+        if self.appearance is not None:
+            return self
+        from .start_types import Point
+        return self.replace(appearance=APPEARANCE if isinstance(init, Point) else 0.0)
 
     def replace(self, **changes) -> "Params":
         """A copy with some fields changed (validated)."""

@@ -29,6 +29,7 @@ from .checks.pair import CheckedPair
 from .checks.validate import check_memory, check_params
 from .kernels import backend
 from .model import STAGES
+from .model.appearance import BAND as APPEARANCE_BAND
 from .model.front import REACH as FRONT_REACH
 from .model.grid import Grid
 from .model.layers import FRONT, front_in_left_view, occlusion_by_layers
@@ -85,7 +86,7 @@ class Solver:
                  profile=False):
         t_start = time.perf_counter()
         backend.before_solver(arch)
-        self.params = check_params(params)
+        self.params = check_params(params).for_start(init)
         pair = CheckedPair.of(left, right, d_max, init, init_frame, self.params)
         self.H, self.W = pair.left.shape[:2]
         self.profile = profile
@@ -263,6 +264,9 @@ class Solver:
         else:
             self.fused.geometry(1, 2.0 * self.c_max)
         reinit = self.iteration % p.reinit_every == 0
+        if self.appearance is not None and self.iteration % p.reinit_every == 1:
+            self.appearance.update(self.left, self.right, ls.phi, self.shapes, hier.precision,
+                                   ls.appearance, p.appearance, APPEARANCE_BAND * PHI_SCALE)
         # the median's last pass also writes D (Eq. 3) from the new phi
         flipped, area = (int(v) for v in ls.evolve(hier.matching_cost, self.c_max, self.shapes,
                                                     self.occ, p, reinit))

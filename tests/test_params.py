@@ -13,6 +13,7 @@ BEYOND_THE_PAPER = {
     "strip_window": (0, 0),              # the z-buffer's occluded strips
     "photometric": False,
     "recover": False,
+    "appearance": 0.0,                   # Eq. 2's data term is the matching cost alone
     "zero_floor": False,                 # the release's grid from 2 px
 }
 
@@ -38,3 +39,13 @@ def test_paper_takes_changes_and_validates_them():
         Params.paper(mu=-1.0)
     with pytest.raises(ValueError, match=r"unknown parameter"):
         Params.paper(speed=2)
+
+
+def test_appearance_resolves_by_the_start():
+    from lss_kernels import Point
+    from lss_kernels.params import APPEARANCE
+    assert Params().appearance is None
+    assert Params().for_start(Point(10.0, 12.0)).appearance == APPEARANCE
+    assert Params().for_start((20.0, 20.0, 8.0, 6.0)).appearance == 0.0
+    assert Params(appearance=0.0).for_start(Point(10.0, 12.0)).appearance == 0.0
+    assert Params(appearance=0.5).for_start((20.0, 20.0, 8.0, 6.0)).appearance == 0.5

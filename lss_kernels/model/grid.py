@@ -8,6 +8,7 @@ between them as a whole (``Solver.grid``).
 import taichi as ti
 
 from ..kernels.backend import FieldPool
+from .appearance import Appearance
 from .costs import BoundaryCosts
 from .front import FrontLayer
 from .hierarchy import PatchHierarchy
@@ -34,7 +35,8 @@ class Grid:
 
     Attributes: ``c_max``, ``pool``, ``extent``, the model's pair ``left``, ``right``, and
     the stages ``matching``, ``hierarchy``, ``messages``, ``costs``, ``initialiser``,
-    ``occ``, ``levelset``, ``front`` (None without ``params.front_margin``), ``shapes``,
+    ``occ``, ``levelset``, ``front`` (None without ``params.front_margin``), ``appearance``
+    (None without ``params.appearance``), ``shapes``,
     ``refinement`` (None without ``params.refine``) and ``fused``.  Their fields have the
     shape of the image's size bucket and the kernels read H and W at run time: they compile
     once per bucket.
@@ -56,6 +58,7 @@ class Grid:
         self.occ = OcclusionGeometry(pool, H, W, C)
         self.levelset = LevelSet(pool, H, W, p)
         self.front = FrontLayer(pool, H, W) if p.front_margin > 0 else None
+        self.appearance = Appearance(pool, H, W) if p.appearance else None
         if self.front is not None:
             self.levelset.hidden = self.front.hidden
             self.initialiser.bridge_gap = BRIDGE_GAP

@@ -136,6 +136,10 @@ class LevelSet:
         self.hidden = None
         if self.has_hidden:
             self.data, self.force = f(), f()
+        # the layers' colour term (lss_kernels.model.appearance), refreshed by its stage
+        self.has_appearance = bool(params.appearance)
+        if self.has_appearance:
+            self.appearance = f()
 
     def setup(self):
         """Allocate the re-initialisation scratch; call once the pool is finalised."""
@@ -322,6 +326,8 @@ class LevelSet:
                         if band > 0 and ti.abs(p) > band:
                             dirac = 0.0
                         data = -m1 + m2
+                        if ti.static(self.has_appearance):
+                            data += self.appearance[y, x]
                         if ti.static(self.has_hidden):
                             self.data[y, x] = data
                             self.force[y, x] = dirac * mu * bt[lane]
