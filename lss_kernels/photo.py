@@ -8,8 +8,11 @@ is one of many, so:
   mask), wide enough to hold the object's occluded strip and the band scored around its
   boundary: the start's box plus ``MARGIN`` pixels on every side and ``d_max`` more to the
   left (the strip lies left of the object, and the background there needs its matches in the
-  right view).  A point's first window is ``2 REACH`` pixels square around it.  Pixels far
-  from the object cost nothing: the time grows with the object, not with the photo;
+  right view).  A point has no box: its start is found (:mod:`lss_kernels.model.init`) in
+  a window ``2 REACH`` pixels square around it, and the solve's first window is the one
+  around the region found.  The fewer other objects and surfaces a window holds, the better
+  one quadratic background explains what lies behind the object.  Pixels far from the
+  object cost nothing: the time grows with the object, not with the photo;
 * when the solved object comes within ``TOUCH`` pixels of a side of the window that is not
   the photo's border, the window grows to hold it (its box plus the margins, the left one
   ``MARGIN`` plus the object's largest disparity) and the solve runs again from the object
@@ -34,7 +37,8 @@ import numpy as np
 from .start_types import Box, Point
 from .params import Params
 
-__all__ = ["MARGIN", "MAX_WINDOWS", "OUTSIDE", "REACH", "TOUCH", "Window", "solve_photo",
+__all__ = ["KEEP_REACH", "MARGIN", "MAX_WINDOWS", "OUTSIDE", "REACH", "TOUCH", "Window",
+           "solve_photo",
            "solve_in_windows"]
 
 #: Half side of a point's first window, pixels.
@@ -45,6 +49,10 @@ MARGIN = 32
 TOUCH = 3
 #: At most this many windows (solves) per photo.
 MAX_WINDOWS = 3
+#: A point's located window is solved when its area is below this share of the point's
+#: reach; a larger one is hardly smaller, and the reach is solved from the set-up that
+#: located the start.
+KEEP_REACH = 0.8
 #: The layer map's value outside the window (not solved).
 OUTSIDE = 255
 
@@ -97,6 +105,10 @@ class Window:
                  "right": (self.x1 < W, mask[:, max(w - t, 0):]),
                  "bottom": (self.y1 < H, mask[max(h - t, 0):, :])}
         return [name for name, (inside, strip) in sides.items() if inside and strip.any()]
+
+    @property
+    def area(self) -> int:
+        return (self.y1 - self.y0) * (self.x1 - self.x0)
 
     def as_tuple(self) -> tuple:
         return (self.x0, self.y0, self.x1, self.y1)
@@ -151,13 +163,17 @@ def _photo_result(result, window: Window, shape: tuple, windows: list):
         recovery={**result.recovery, "windows": windows})
 
 
-def solve_in_windows(run, left, right, d_max, init):
+def solve_in_windows(run, left, right, d_max, init, locate=None):
     """The window loop of the module text around ``run(left, right, init) -> (result,
     facts)``, a two-layer-or-more solve of a crop (``facts``: the solve's left image, its
     initial foreground in the left view and its start report, or None).  ``left``, ``right``
-    are the photo's checked images, ``init`` its checked start (left view).
+    are the photo's checked images, ``init`` its checked start (left view).  ``locate(left,
+    right, init) -> mask``: the initial foreground (left view) a solve of the crop would start
+    from; given, a point's first window is the one around that region (module text).
 
-    Returns ``(result, facts)`` at the photo's size (:func:`_photo_result`)."""
+    Returns ``(result, facts)`` at the photo's size (:func:`_photo_result`); ``result.recovery
+    ["windows"]`` lists the windows solved, after a point's located start
+    (``{"window", "start", "seconds"}``) when ``locate`` is given."""
     shape = left.shape[:2]
     box = _start_box(init, shape)
     if box is None:                                  # "auto": no object to place a window
@@ -165,14 +181,17 @@ def solve_in_windows(run, left, right, d_max, init):
     else:
         window = Window.around(box, d_max, shape)
     windows = []
-    start = init
+    if isinstance(init, Point) and locate is not None:
+        window = _located(locate, left, right, d_max, init, window, windows)
+    start, solved = init, 0
     while True:
         t0 = time.perf_counter()
         result, facts = run(window.crop(left), window.crop(right), _in_window(start, window))
         touched = window.sides_touched(result.foreground, shape)
+        solved += 1
         windows.append({"window": list(window.as_tuple()), "touched": touched,
                         "seconds": round(time.perf_counter() - t0, 3)})
-        if not touched or len(windows) == MAX_WINDOWS or not result.foreground.any():
+        if not touched or solved == MAX_WINDOWS or not result.foreground.any():
             break
         ys, xs = np.nonzero(result.foreground)
         d_object = float(np.max(result.disparity[ys, xs]))
@@ -190,6 +209,26 @@ def solve_in_windows(run, left, right, d_max, init):
     return _photo_result(result, window, shape, windows), facts
 
 
+def _located(locate, left, right, d_max, point, window, windows) -> Window:
+    """The window around the region a point's solve starts from, found by ``locate`` in
+    ``window``; ``window`` itself when no region is found or when the region's window
+    covers ``KEEP_REACH`` of its area or more (the set-up made to locate the start is
+    then the solve's).  The step is added to ``windows``."""
+    t0 = time.perf_counter()
+    region = locate(window.crop(left), window.crop(right), _in_window(point, window))
+    found = window
+    if region is not None and region.any():
+        ys, xs = np.nonzero(region)
+        found = Window.around((xs.min() + window.x0, ys.min() + window.y0,
+                               xs.max() + window.x0, ys.max() + window.y0), d_max,
+                              left.shape[:2])
+        if found.area >= KEEP_REACH * window.area:      # not worth a second set-up
+            found = window
+    windows.append({"window": list(window.as_tuple()), "start": list(found.as_tuple()),
+                    "seconds": round(time.perf_counter() - t0, 3)})
+    return found
+
+
 def solve_photo(left, right, d_max, init, params=None, arch=None, callback=None):
     """Solve the object under ``init`` in a whole photo (module text).
 
@@ -204,11 +243,13 @@ def solve_photo(left, right, d_max, init, params=None, arch=None, callback=None)
         with the third layer, ``OUTSIDE`` beyond the window), ``window`` ``(x0, y0, x1, y1)``, and
         ``recovery["windows"]``: each window solved, the sides the object touched, seconds.
     """
-    from .checks.around import solve
-    from .checks.validate import check_inputs
-    params = params if params is not None else Params()
-    left, right, d_max, init = check_inputs(left, right, d_max, init, "left", params)
-
-    def run(l, r, start):
-        return solve(l, r, d_max, start, params=params, arch=arch, callback=callback), None
-    return solve_in_windows(run, left, right, d_max, init)[0]
+    from .apps.jobs import Job, SolverCache
+    from .kernels import backend
+    if arch is not None:
+        backend.init(arch=arch)
+    cache = SolverCache()
+    try:
+        job = Job("photo", left, right, d_max, init, "left", None, photo=True)
+        return cache.solve(job, params if params is not None else Params(), callback)[0]
+    finally:
+        cache.close()

@@ -74,6 +74,71 @@ def test_the_window_follows_the_object_until_it_holds_it():
     assert (result.confidence[result.layers == OUTSIDE] == 0).all()
 
 
+def test_a_points_window_is_the_one_around_its_located_start():
+    # the start found under a point at (300, 200) of a 600 x 400 photo is a 41 x 31 region:
+    # the solve's window is that region's plus the margins (d_max to the left), not the
+    # point's +- REACH
+    shape = (400, 600)
+    left = np.zeros(shape + (3,), np.float32)
+    region = np.zeros(shape, bool)
+    region[185:216, 280:321] = True
+    reach = Window(300 - REACH - MARGIN - 64, 200 - REACH - MARGIN, 300 + REACH + MARGIN + 1,
+                   200 + REACH + MARGIN + 1)
+    tight = Window(280 - MARGIN - 64, 185 - MARGIN, 320 + MARGIN + 1, 215 + MARGIN + 1)
+    located, solved = [], []
+
+    def locate(l, r, start):
+        located.append((l.shape[:2], start))
+        return reach.crop(region)
+
+    def run(l, r, start):
+        solved.append((l.shape[:2], start))
+        return _result(tight.crop(region)), None
+    result, _ = solve_in_windows(run, left, left, 64.0, Point(300, 200), locate)
+    assert located == [(reach.shape, Point(300 - reach.x0, 200 - reach.y0))]
+    assert solved == [(tight.shape, Point(300 - tight.x0, 200 - tight.y0))]
+    assert result.window == tight.as_tuple()
+    assert result.recovery["windows"][0]["start"] == list(tight.as_tuple())
+    assert np.array_equal(result.foreground, region)
+    # a box is its own window: nothing to locate
+    solved.clear()
+    solve_in_windows(run, left, left, 64.0, Box(280, 185, 320, 215), locate)
+    assert len(located) == 1 and solved[0][0] == tight.shape
+
+
+def test_a_located_window_almost_as_large_as_the_reach_is_not_taken():
+    # a start that fills most of the point's reach: the reach is solved (from the set-up
+    # that located it), not a window hardly smaller
+    left = np.zeros(SHAPE + (3,), np.float32)
+    reach = Window.around((250 - REACH, 150 - REACH, 250 + REACH, 150 + REACH), 32.0, SHAPE)
+    shapes = []
+
+    def locate(l, r, start):
+        region = np.zeros(l.shape[:2], bool)
+        region[10:-10, 40:-10] = True
+        return region
+
+    def run(l, r, start):
+        shapes.append(l.shape[:2])
+        return _result(np.zeros(l.shape[:2], bool)), None
+    result, _ = solve_in_windows(run, left, left, 32.0, Point(250, 150), locate)
+    assert shapes == [reach.shape]
+    assert result.recovery["windows"][0]["start"] == list(reach.as_tuple())
+
+
+def test_a_point_with_no_start_found_keeps_its_reach():
+    left = np.zeros(SHAPE + (3,), np.float32)
+    shapes = []
+
+    def run(l, r, start):
+        shapes.append(l.shape[:2])
+        return _result(np.zeros(l.shape[:2], bool)), None
+    solve_in_windows(run, left, left, 32.0, Point(250, 150),
+                     lambda l, r, start: np.zeros(l.shape[:2], bool))
+    assert shapes == [Window.around((250 - REACH, 150 - REACH, 250 + REACH, 150 + REACH),
+                                    32.0, SHAPE).shape]
+
+
 def test_the_window_stops_growing_after_max_windows():
     left = np.zeros(SHAPE + (3,), np.float32)
     calls = []
@@ -122,8 +187,13 @@ def test_a_whole_photo_from_a_click(ti_arch):
     scene = _rod_scene()
     result = solve_photo(scene.left, scene.right, scene.d_max, Point(*scene.init_point),
                          params=Params(front_margin=FRONT_MARGIN))
+    # the window is the one around the start found under the click: it holds the object
+    # with its margins, leaves out the box far to the left and ends short of the point's
+    # +- REACH (the right border)
     x0, y0, x1, y1 = result.window
-    assert x0 > 60 and (y0, x1, y1) == (0, 400, 128)      # the box far to the left is left out
+    ys, xs = np.nonzero(scene.fg_left)
+    assert 60 < x0 <= xs.min() - MARGIN and x1 >= xs.max() + MARGIN and x1 < 400
+    assert (y0, y1) == (0, 128)
     assert result.disparity.shape == scene.fg_left.shape
     assert np.isinf(result.disparity[:, :x0]).all() and (result.layers[:, :x0] == OUTSIDE).all()
     assert set(np.unique(result.layers)) <= {0, OBJECT, FRONT, OUTSIDE}
@@ -155,3 +225,28 @@ def test_with_nothing_in_front_the_third_layer_changes_no_bit(ti_arch):
     for name in ("disparity", "surface", "occlusion", "foreground", "phi", "layers"):
         assert np.array_equal(getattr(two, name), getattr(three, name)), name
     assert two.iterations == three.iterations
+
+
+@pytest.mark.slow
+def test_a_kept_reach_is_solved_from_the_set_up_that_located_the_start(ti_arch, monkeypatch):
+    # the easy scene's object fills most of the image: the located window is the whole
+    # image, the point's reach; its solve runs from the location's set-up (no set-up more
+    # than a solve of the image makes) and gives that solve's answer, bit for bit
+    from lss_kernels import Solver, solve
+    from lss_kernels.photo import solve_photo
+    from lss_kernels.scenes import make_scene
+    set_ups = []
+    load = Solver._load
+    monkeypatch.setattr(Solver, "_load", lambda self, *a: set_ups.append(1) or load(self, *a))
+    scene = make_scene("easy", noise=0.01)
+    point = Point(68, 45)
+    photo = solve_photo(scene.left, scene.right, scene.d_max, point)
+    n_photo = len(set_ups)
+    whole = solve(scene.left, scene.right, scene.d_max, point)
+    assert n_photo == len(set_ups) - n_photo >= 1
+    windows = photo.recovery["windows"]
+    assert windows[0]["start"] == windows[0]["window"] == [0, 0, 128, 96]
+    assert len(windows) == 2 and windows[1]["touched"] == []
+    for name in ("disparity", "occlusion", "foreground", "phi"):
+        assert np.array_equal(getattr(photo, name), getattr(whole, name)), name
+    assert photo.iterations == whole.iterations
