@@ -35,11 +35,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .start_types import Box, Point
-from .params import Params
 
 __all__ = ["KEEP_REACH", "MARGIN", "MAX_WINDOWS", "OUTSIDE", "REACH", "TOUCH", "Window",
-           "solve_photo",
-           "solve_in_windows"]
+           "solve_photo", "solve_in_windows"]
 
 #: Half side of a point's first window, pixels.
 REACH = 128
@@ -243,13 +241,15 @@ def solve_photo(left, right, d_max, init, params=None, arch=None, callback=None)
         with the third layer, ``OUTSIDE`` beyond the window), ``window`` ``(x0, y0, x1, y1)``, and
         ``recovery["windows"]``: each window solved, the sides the object touched, seconds.
     """
-    from .apps.jobs import Job, SolverCache
+    from .apps.jobs import Job, SolverCache       # its solver cache keeps a located set-up
+    from .checks.validate import check_params
     from .kernels import backend
+    params = check_params(params)
     if arch is not None:
         backend.init(arch=arch)
     cache = SolverCache()
     try:
         job = Job("photo", left, right, d_max, init, "left", None, photo=True)
-        return cache.solve(job, params if params is not None else Params(), callback)[0]
+        return cache.solve(job, params, callback)[0]
     finally:
         cache.close()
