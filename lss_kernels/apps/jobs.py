@@ -137,6 +137,7 @@ class SolverCache:
         from dataclasses import replace
         from ..photo import solve_in_windows
         from ..checks.pair import CheckedPair
+        from ..checks.recovery import first_solve_params
         from ..checks.validate import check_inputs
         if job.init_frame != "left":
             raise ValueError("init: a whole photo's start is given in the left view")
@@ -149,7 +150,7 @@ class SolverCache:
 
         def locate(l, r, start):
             pair = CheckedPair(l, r, d_max, start, "left", params)
-            self._set_up(pair, params)
+            self._set_up(pair, first_solve_params(params, pair))   # as the solve's first
             self.primed = (pair, start, l)
             return self.solver.initial_left
         try:
