@@ -37,7 +37,7 @@ import numpy as np
 from .start_types import Box, Point
 
 __all__ = ["KEEP_REACH", "MARGIN", "MAX_WINDOWS", "OUTSIDE", "REACH", "TOUCH", "Window",
-           "solve_photo", "solve_in_windows"]
+           "solve_in_windows", "solve_photo", "solve_photo_cached"]
 
 #: Half side of a point's first window, pixels.
 REACH = 128
@@ -227,6 +227,24 @@ def _located(locate, left, right, d_max, point, window, windows) -> Window:
     return found
 
 
+def solve_photo_cached(cache, left, right, d_max, init, params, callback=None):
+    """:func:`solve_photo` with the solvers of ``cache`` (a
+    :class:`~lss_kernels.solver_cache.SolverCache`, left open); returns ``(result, facts)``
+    as :func:`solve_in_windows`."""
+    from .checks.validate import check_inputs
+    left, right, d_max, init = check_inputs(left, right, d_max, init, "left", params)
+
+    def run(l, r, start):
+        return cache.solve_pair(l, r, d_max, start, "left", params, callback)
+
+    def locate(l, r, start):
+        return cache.locate(l, r, d_max, start, params)
+    try:
+        return solve_in_windows(run, left, right, d_max, init, locate)
+    finally:
+        cache.forget()
+
+
 def solve_photo(left, right, d_max, init, params=None, arch=None, callback=None):
     """Solve the object under ``init`` in a whole photo (module text).
 
@@ -241,15 +259,14 @@ def solve_photo(left, right, d_max, init, params=None, arch=None, callback=None)
         with the third layer, ``OUTSIDE`` beyond the window), ``window`` ``(x0, y0, x1, y1)``, and
         ``recovery["windows"]``: each window solved, the sides the object touched, seconds.
     """
-    from .apps.jobs import Job, SolverCache       # its solver cache keeps a located set-up
     from .checks.validate import check_params
     from .kernels import backend
+    from .solver_cache import SolverCache
     params = check_params(params)
     if arch is not None:
         backend.init(arch=arch)
     cache = SolverCache()
     try:
-        job = Job("photo", left, right, d_max, init, "left", None, photo=True)
-        return cache.solve(job, params, callback)[0]
+        return solve_photo_cached(cache, left, right, d_max, init, params, callback)[0]
     finally:
         cache.close()

@@ -37,6 +37,8 @@ from typing import Any
 
 import numpy as np
 
+from .. import solver_cache
+
 __all__ = ["Job", "SolverCache", "job_from_scene", "run_job", "scene_init", "sweep_summary",
            "write_outputs"]
 
@@ -102,101 +104,24 @@ def job_from_scene(scene, d_max=None, init=None):
                scene if has_truth else None)
 
 
-class SolverCache:
+class SolverCache(solver_cache.SolverCache):
     """Keeps the last solver for the next job of the same image size, search range and
     parameters (:meth:`lss_kernels.Solver.reset`: no kernels to load again), and closes it
-    when another one is needed.  A whole photo's point is located first
-    (:func:`lss_kernels.photo.solve_in_windows`): when its window stays the point's reach,
-    the solve runs from the set-up the location made."""
-
-    def __init__(self):
-        self.key, self.solver = None, None
-        self.primed = None    # (pair, start, left) set up by a location and not yet run
+    when another one is needed (:class:`lss_kernels.solver_cache.SolverCache`)."""
 
     def solve(self, job, params, callback=None):
         """Solve ``job`` (solved again when the model collapses, :mod:`lss_kernels.checks.recovery`;
         in windows of a whole photo, :mod:`lss_kernels.photo`, for ``job.photo``); returns
         ``(result, facts)``: the left image, the initial foreground (left view) and the
         initialisation's report of the run kept."""
-        from ..checks.pair import CheckedPair
-        from ..checks.recovery import with_recovery
         if job.photo:
-            return self._solve_photo(job, params, callback)
-        pair = self._primed_pair(job)
-        if pair is None:
-            pair = CheckedPair(job.left, job.right, job.d_max, job.init, job.init_frame,
-                               params)
-
-        def run(p):
-            result, solver = self._run(pair, p, callback)
-            return result, (solver.left_image, solver.initial_left,
-                            solver.init_info)
-        return with_recovery(run, params, pair.d_max, pair)
-
-    def _solve_photo(self, job, params, callback):
-        from dataclasses import replace
-        from ..photo import solve_in_windows
-        from ..checks.pair import CheckedPair
-        from ..checks.recovery import first_solve_params
-        from ..checks.validate import check_inputs
-        if job.init_frame != "left":
-            raise ValueError("init: a whole photo's start is given in the left view")
-        left, right, d_max, init = check_inputs(job.left, job.right, job.d_max, job.init,
-                                                "left", params)
-
-        def run(l, r, start):
-            return self.solve(replace(job, left=l, right=r, init=start, photo=False), params,
-                              callback)
-
-        def locate(l, r, start):
-            pair = CheckedPair(l, r, d_max, start, "left", params)
-            self._set_up(pair, first_solve_params(params, pair))   # as the solve's first
-            self.primed = (pair, start, l)
-            return self.solver.initial_left
-        try:
-            return solve_in_windows(run, left, right, d_max, init, locate)
-        finally:
-            self.primed = None
-
-    def _primed_pair(self, job):
-        """The pair a location set up for ``job`` (the same crop and start), or None."""
-        if self.primed is None:
-            return None
-        pair, start, left = self.primed
-        if (job.init_frame == "left" and start == job.init
-                and np.shape(job.left) == left.shape and np.array_equal(job.left, left)):
-            return pair
-        return None
-
-    def _set_up(self, pair, params):
-        """This cache's solver for ``pair``, set up (reused when the size, search range and
-        parameters are its own, else new)."""
-        from ..params import c_max
-        from ..solver import Solver
-        key = (pair.left.shape[:2], c_max(pair.d_max), params)
-        args = (pair, pair.right, pair.d_max, pair.init)
-        self.primed = None
-        if key == self.key:
-            self.solver.reset(*args, init_frame=pair.init_frame)
-        else:
-            self.close()
-            self.solver = Solver(*args, params=params, init_frame=pair.init_frame)
-            self.key = key
-
-    def _run(self, pair, params, callback=None):
-        """Solve a :class:`~lss_kernels.checks.pair.CheckedPair` with a reused or new
-        solver (as a location set it up, when it did); returns ``(result, solver)``."""
-        from ..params import c_max
-        primed = self.primed is not None and self.primed[0] is pair
-        if not (primed and self.key == (pair.left.shape[:2], c_max(pair.d_max), params)):
-            self._set_up(pair, params)
-        self.primed = None
-        return self.solver.run(callback), self.solver
-
-    def close(self):
-        if self.solver is not None:
-            self.solver.close()
-        self.key, self.solver = None, None
+            from ..photo import solve_photo_cached
+            if job.init_frame != "left":
+                raise ValueError("init: a whole photo's start is given in the left view")
+            return solve_photo_cached(self, job.left, job.right, job.d_max, job.init, params,
+                                      callback)
+        return self.solve_pair(job.left, job.right, job.d_max, job.init, job.init_frame,
+                               params, callback)
 
 
 def run_job(job, out_dir, params, cache=None, callback=None, extra=None, calib=None):
