@@ -39,13 +39,13 @@ class SolverCache:
         return with_recovery(run, params, pair.d_max, pair)
 
     def locate(self, left, right, d_max, start, params):
-        """The initial foreground (left view) that a solve of the pair would start from
-        (``start`` in the left view): the set-up of its first run, kept for
-        :meth:`solve_pair` of the same pair and start."""
+        """The initial foreground (left view) that a solve of the pair with ``params``
+        would start from (``start`` in the left view), kept set up for :meth:`solve_pair`
+        of the same pair and start.  A periodic pair's first run changes the parameters
+        (:func:`~lss_kernels.checks.recovery.with_recovery`) and sets up again."""
         from .checks.pair import CheckedPair
-        from .checks.recovery import first_solve_params
         pair = CheckedPair(left, right, d_max, start, "left", params)
-        self._set_up(pair, first_solve_params(params, pair))
+        self._set_up(pair, params)
         self.primed = (pair, start, left)
         return self.solver.initial_left
 

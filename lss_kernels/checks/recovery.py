@@ -57,7 +57,7 @@ from .periodicity import PERIODIC_AREA
 __all__ = ["CollapsedModelWarning", "MAX_CROSSING", "MAX_OFFSET", "MAX_OUT_OF_RANGE",
            "MIN_JUMP", "PERIODIC", "RECOVERY", "ShortRangeWarning", "SwappedViewsWarning",
            "UnreliableStartWarning", "WARNINGS", "collapse", "layer_offsets", "model_health",
-           "first_solve_params", "named_warnings", "with_recovery"]
+           "named_warnings", "with_recovery"]
 
 #: Smallest mean disparity jump (left-view pixels) over the foreground of a sound model.
 MIN_JUMP = 1.0
@@ -229,16 +229,6 @@ def _on_tooth(run, pair, record):
     return moved
 
 
-def first_solve_params(params, pair):
-    """The parameters of :func:`with_recovery`'s first solve of the checked ``pair``:
-    ``params`` changed by ``PERIODIC`` when the pair is periodic over at least
-    ``PERIODIC_AREA`` of its tiles (and ``params.recover``), else ``params``."""
-    if (params.recover and params.replace(**RECOVERY) != params
-            and pair.periodic >= PERIODIC_AREA):
-        return params.replace(**PERIODIC)
-    return params
-
-
 def with_recovery(run, params, d_max, pair=None):
     """``run(params) -> (result, extra)`` once, and again when the model collapsed (and
     ``params.recover``); returns the ``(result, extra)`` kept, with ``result.recovery`` set.
@@ -261,8 +251,9 @@ def with_recovery(run, params, d_max, pair=None):
         record["direction"], record["range"] = _check_matches(pair)
     first_params, second_params = params, params.replace(**RECOVERY)
     if params.recover and pair is not None and second_params != params:
-        record["periodic"] = pair.periodic
-        if first_solve_params(params, pair) != params:
+        fraction = pair.periodic
+        record["periodic"] = fraction
+        if fraction >= PERIODIC_AREA:
             first_params, second_params = params.replace(**PERIODIC), params
             record["first_params"] = dict(PERIODIC)
             run = _on_tooth(run, pair, record)
