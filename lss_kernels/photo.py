@@ -104,6 +104,13 @@ class Window:
                  "bottom": (self.y1 < H, mask[max(h - t, 0):, :])}
         return [name for name, (inside, strip) in sides.items() if inside and strip.any()]
 
+    def around_mask(self, mask: np.ndarray, left, shape) -> "Window":
+        """The window (:meth:`around`) of the box of ``mask``, a non-empty mask of this
+        window, in the photo of ``shape``."""
+        ys, xs = np.nonzero(mask)
+        return Window.around((xs.min() + self.x0, ys.min() + self.y0, xs.max() + self.x0,
+                              ys.max() + self.y0), left, shape)
+
     @property
     def area(self) -> int:
         return (self.y1 - self.y0) * (self.x1 - self.x0)
@@ -191,11 +198,8 @@ def solve_in_windows(run, left, right, d_max, init, locate=None):
                         "seconds": round(time.perf_counter() - t0, 3)})
         if not touched or solved == MAX_WINDOWS or not result.foreground.any():
             break
-        ys, xs = np.nonzero(result.foreground)
-        d_object = float(np.max(result.disparity[ys, xs]))
-        grown = window.union(Window.around((xs.min() + window.x0, ys.min() + window.y0,
-                                            xs.max() + window.x0, ys.max() + window.y0),
-                                           d_object, shape))
+        d_object = float(np.max(result.disparity[result.foreground]))
+        grown = window.union(window.around_mask(result.foreground, d_object, shape))
         if grown == window:
             break
         start = window.paste(result.foreground, shape, False)
@@ -216,10 +220,7 @@ def _located(locate, left, right, d_max, point, window, windows) -> Window:
     region = locate(window.crop(left), window.crop(right), _in_window(point, window))
     found = window
     if region is not None and region.any():
-        ys, xs = np.nonzero(region)
-        found = Window.around((xs.min() + window.x0, ys.min() + window.y0,
-                               xs.max() + window.x0, ys.max() + window.y0), d_max,
-                              left.shape[:2])
+        found = window.around_mask(region, d_max, left.shape[:2])
         if found.area >= KEEP_REACH * window.area:      # not worth a second set-up
             found = window
     windows.append({"window": list(window.as_tuple()), "start": list(found.as_tuple()),
