@@ -58,7 +58,8 @@ class SolverCache:
         if self.primed is None:
             return None
         pair, start, located = self.primed
-        if (init_frame == "left" and start == init and np.shape(left) == located.shape
+        if (init_frame == "left" and type(init) is type(start) and start == init
+                and np.shape(left) == located.shape
                 and np.array_equal(left, located)):
             return pair
         return None
@@ -67,7 +68,7 @@ class SolverCache:
         """This cache's solver for ``pair``, set up (reused when the size, search range and
         parameters are its own, else new)."""
         from .solver import Solver
-        key = (pair.left.shape[:2], c_max(pair.d_max), params)
+        key = _key(pair, params)
         args = (pair, pair.right, pair.d_max, pair.init)
         self.primed = None
         if key == self.key:
@@ -81,7 +82,7 @@ class SolverCache:
         """Solve a :class:`~lss_kernels.checks.pair.CheckedPair` with a reused or new
         solver (as :meth:`locate` set it up, when it did); returns ``(result, solver)``."""
         primed = self.primed is not None and self.primed[0] is pair
-        if not (primed and self.key == (pair.left.shape[:2], c_max(pair.d_max), params)):
+        if not (primed and self.key == _key(pair, params)):
             self._set_up(pair, params)
         self.primed = None
         return self.solver.run(callback), self.solver
@@ -90,3 +91,9 @@ class SolverCache:
         if self.solver is not None:
             self.solver.close()
         self.key, self.solver, self.primed = None, None, None
+
+
+def _key(pair, params) -> tuple:
+    """What a solver must share with ``pair`` to be reset for it instead of built anew:
+    the image size, the candidate count of the search range and the parameters."""
+    return (pair.left.shape[:2], c_max(pair.d_max), params)
