@@ -56,6 +56,36 @@ def test_appearance_matches_numpy_reference(ti_arch, weight):
     np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-6 * weight)
 
 
+def test_the_colour_term_is_the_same_on_every_run(ti_arch):
+    # the band's mean precision is a sum over many threads' pixels: summed in the threads'
+    # order it differed in its last bits from run to run, and so did a point's whole solve
+    rng = np.random.default_rng(4)
+    h, w = 320, 320
+    y, x = np.mgrid[0:h, 0:w]
+    phi = ((150.0 - np.hypot(x - 160.0, y - 160.0)) * PHI_SCALE).astype(np.float32)
+    precision = rng.uniform(0.0, 40.0, (h, w)).astype(np.float32)
+    band = 16.0 * PHI_SCALE
+    pool = FieldPool()
+    shapes = GlobalShapes(pool, h, w)
+    stage = Appearance(pool, h, w)
+    views = [pool.vector(3, ti.f32, (h, w)) for _ in range(2)]
+    phi_f, precision_f, out = (pool.field(ti.f32, (h, w)) for _ in range(3))
+    pool.finalize()
+    for view in views:
+        view.from_numpy(rng.uniform(0.0, 1.0, (h, w, 3)).astype(np.float32))
+    phi_f.from_numpy(phi)
+    precision_f.from_numpy(precision)
+    shapes.set(np.array([0, 0, 0, 0, 0, 2.0]), np.array([0, 0, 0, 0, 0, 1.0]))
+    runs = []
+    for _ in range(8):
+        stage.update(views[0], views[1], phi_f, shapes, precision_f, out, 0.06, band)
+        runs.append((out.to_numpy().tobytes(), float(stage.sums.to_numpy()[2])))
+    assert all(run == runs[0] for run in runs)
+    in_band = np.abs(phi) < band
+    np.testing.assert_allclose(runs[0][1], precision[in_band].astype(np.float64).sum(),
+                               rtol=1e-5)
+
+
 def test_appearance_weight_is_validated():
     with pytest.raises(ValueError, match="appearance"):
         Params(appearance=-0.1)

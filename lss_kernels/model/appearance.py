@@ -43,6 +43,7 @@ class Appearance:
         self.bins = BINS ** 3
         self.histogram = pool.field(ti.f32, (2, self.bins), bucket=True)
         self.sums = pool.field(ti.f32, (4,), bucket=True)  # the layers' counts, P, the band
+        self.row_precision = pool.field(ti.f32, (self.extent.bucket[0],), bucket=True)
 
     @ti.func
     def _colour(self, image: ti.template(), y, x):
@@ -80,8 +81,18 @@ class Appearance:
                 theta = shapes.value(j, ti.cast(x, ti.f32), ti.cast(y, ti.f32))
                 self.histogram[j, self._bin(left, right, y, x, theta)] += 1.0
                 self.sums[j] += 1.0
-                self.sums[2] += precision[y, x]
                 self.sums[3] += 1.0
+        # the band's precision summed in a fixed order (a row a thread, then the rows in
+        # turn): a float sum in the threads' order would differ from run to run
+        for y in range(self.extent.height()):
+            row = 0.0
+            for x in range(self.extent.width()):
+                if ti.abs(phi[y, x]) < band:
+                    row += precision[y, x]
+            self.row_precision[y] = row
+        ti.loop_config(serialize=True)
+        for y in range(self.extent.height()):
+            self.sums[2] += self.row_precision[y]
         for y, x in ti.ndrange(self.extent.height(), self.extent.width()):
             p = phi[y, x]
             term = 0.0
