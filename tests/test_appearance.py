@@ -16,6 +16,28 @@ def _colours(rng, shape, levels):
     return (rng.choice(levels, size=shape) + 0.25) / BINS
 
 
+def _updates(left, right, phi, precision, weight, band, times=1):
+    """``times`` runs of :meth:`Appearance.update` on the inputs (``Theta_1`` 2 px,
+    ``Theta_2`` 1 px): each run's term and its band's sum of precisions."""
+    h, w = phi.shape
+    pool = FieldPool()
+    shapes = GlobalShapes(pool, h, w)
+    stage = Appearance(pool, h, w)
+    views = [pool.vector(3, ti.f32, (h, w)) for _ in range(2)]
+    phi_f, precision_f, out = (pool.field(ti.f32, (h, w)) for _ in range(3))
+    pool.finalize()
+    views[0].from_numpy(np.asarray(left, np.float32))
+    views[1].from_numpy(np.asarray(right, np.float32))
+    phi_f.from_numpy(phi)
+    precision_f.from_numpy(precision)
+    shapes.set(np.array([0, 0, 0, 0, 0, 2.0]), np.array([0, 0, 0, 0, 0, 1.0]))
+    runs = []
+    for _ in range(times):
+        stage.update(views[0], views[1], phi_f, shapes, precision_f, out, weight, band)
+        runs.append((out.to_numpy(), float(stage.sums.to_numpy()[2])))
+    return runs
+
+
 @pytest.mark.parametrize("weight", [0.06, 1.0])
 def test_appearance_matches_numpy_reference(ti_arch, weight):
     rng = np.random.default_rng(3)
@@ -33,23 +55,11 @@ def test_appearance_matches_numpy_reference(ti_arch, weight):
     precision = rng.uniform(0.0, 4.0, (h, w)).astype(np.float32)
     band = 4.0 * PHI_SCALE
 
-    pool = FieldPool()
-    shapes = GlobalShapes(pool, h, w)
-    stage = Appearance(pool, h, w)
-    views = [pool.vector(3, ti.f32, (h, w)) for _ in range(2)]
-    phi_f, precision_f, out = (pool.field(ti.f32, (h, w)) for _ in range(3))
-    pool.finalize()
-    views[0].from_numpy(left.astype(np.float32))
-    views[1].from_numpy(right.astype(np.float32))
-    phi_f.from_numpy(phi)
-    precision_f.from_numpy(precision)
-    shapes.set(np.array([0, 0, 0, 0, 0, 2.0]), np.array([0, 0, 0, 0, 0, 1.0]))
-    stage.update(views[0], views[1], phi_f, shapes, precision_f, out, weight, band)
+    got = _updates(left, right, phi, precision, weight, band)[0][0]
 
     expected = appearance_term(left, right, phi.astype(np.float64), np.full((h, w), 2.0),
                                np.full((h, w), 1.0), precision.astype(np.float64), weight,
                                band)
-    got = out.to_numpy()
     in_band = np.abs(phi) < band
     assert in_band.sum() > 100 and (np.abs(expected[in_band]) > 0).mean() > 0.9
     assert np.all(got[~in_band] == 0.0)
@@ -65,22 +75,10 @@ def test_the_colour_term_is_the_same_on_every_run(ti_arch):
     phi = ((150.0 - np.hypot(x - 160.0, y - 160.0)) * PHI_SCALE).astype(np.float32)
     precision = rng.uniform(0.0, 40.0, (h, w)).astype(np.float32)
     band = 16.0 * PHI_SCALE
-    pool = FieldPool()
-    shapes = GlobalShapes(pool, h, w)
-    stage = Appearance(pool, h, w)
-    views = [pool.vector(3, ti.f32, (h, w)) for _ in range(2)]
-    phi_f, precision_f, out = (pool.field(ti.f32, (h, w)) for _ in range(3))
-    pool.finalize()
-    for view in views:
-        view.from_numpy(rng.uniform(0.0, 1.0, (h, w, 3)).astype(np.float32))
-    phi_f.from_numpy(phi)
-    precision_f.from_numpy(precision)
-    shapes.set(np.array([0, 0, 0, 0, 0, 2.0]), np.array([0, 0, 0, 0, 0, 1.0]))
-    runs = []
-    for _ in range(8):
-        stage.update(views[0], views[1], phi_f, shapes, precision_f, out, 0.06, band)
-        runs.append((out.to_numpy().tobytes(), float(stage.sums.to_numpy()[2])))
-    assert all(run == runs[0] for run in runs)
+    left, right = (rng.uniform(0.0, 1.0, (h, w, 3)) for _ in range(2))
+    runs = _updates(left, right, phi, precision, 0.06, band, times=8)
+    assert all(term.tobytes() == runs[0][0].tobytes() and total == runs[0][1]
+               for term, total in runs)
     in_band = np.abs(phi) < band
     np.testing.assert_allclose(runs[0][1], precision[in_band].astype(np.float64).sum(),
                                rtol=1e-5)
