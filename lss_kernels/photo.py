@@ -16,7 +16,9 @@ is one of many, so:
 * when the solved object comes within ``TOUCH`` pixels of a side of the window that is not
   the photo's border, the window grows to hold it (its box plus the margins, the left one
   ``MARGIN`` plus the object's largest disparity) and the solve runs again from the object
-  found, up to ``MAX_WINDOWS`` windows;
+  found, up to ``MAX_WINDOWS`` windows; a point stays the pair's anchor in every window
+  (the checks after a solve keep the object that holds it:
+  :func:`~lss_kernels.checks.outline.on_layers`);
 * the window's solve is :func:`lss_kernels.solve` with the given parameters; the third layer
   (``Params.front_margin``, :mod:`lss_kernels.model.front`: what stands in front of the
   object leaves both fits and the data term) is off unless they turn it on.
@@ -169,9 +171,11 @@ def _photo_result(result, window: Window, shape: tuple, windows: list):
 
 
 def solve_in_windows(run, left, right, d_max, init, locate=None):
-    """The window loop of the module text around ``run(left, right, init) -> (result,
-    facts)``, a two-layer-or-more solve of a crop (``facts``: the solve's left image, its
-    initial foreground in the left view and its start report, or None).  ``left``, ``right``
+    """The window loop of the module text around ``run(left, right, init, anchor) ->
+    (result, facts)``, a two-layer-or-more solve of a crop (``anchor``: a point's pixel in
+    the crop, which the object must hold, also when a grown window starts from the object
+    found; else None.  ``facts``: the solve's left image, its initial foreground in the left
+    view and its start report, or None).  ``left``, ``right``
     are the photo's checked images, ``init`` its checked start (left view).  ``locate(left,
     right, init) -> mask``: the initial foreground (left view) a solve of the crop would start
     from; given, a point's first window is the one around that region (module text).
@@ -191,7 +195,9 @@ def solve_in_windows(run, left, right, d_max, init, locate=None):
     start, solved = init, 0
     while True:
         t0 = time.perf_counter()
-        result, facts = run(window.crop(left), window.crop(right), _in_window(start, window))
+        anchor = _in_window(init, window) if isinstance(init, Point) else None
+        result, facts = run(window.crop(left), window.crop(right), _in_window(start, window),
+                            anchor)
         touched = window.sides_touched(result.foreground, shape)
         solved += 1
         windows.append({"window": list(window.as_tuple()), "touched": touched,
@@ -235,8 +241,8 @@ def solve_photo_cached(cache, left, right, d_max, init, params, callback=None):
     from .checks.validate import check_inputs
     left, right, d_max, init = check_inputs(left, right, d_max, init, "left", params)
 
-    def run(l, r, start):
-        return cache.solve_pair(l, r, d_max, start, "left", params, callback)
+    def run(l, r, start, anchor):
+        return cache.solve_pair(l, r, d_max, start, "left", params, callback, anchor)
 
     def locate(l, r, start):
         return cache.locate(l, r, d_max, start, params)

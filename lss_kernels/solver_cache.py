@@ -22,16 +22,21 @@ class SolverCache:
         self.key, self.solver = None, None
         self.primed = None    # (pair, start, left) set up by locate() and not yet run
 
-    def solve_pair(self, left, right, d_max, init, init_frame, params, callback=None):
+    def solve_pair(self, left, right, d_max, init, init_frame, params, callback=None,
+                   anchor=None):
         """Solve a pair (solved again when the model collapses,
         :func:`~lss_kernels.checks.recovery.with_recovery`); returns ``(result, facts)``:
         the left image, the initial foreground (left view) and the initialisation's report
-        of the run kept.  A pair that :meth:`locate` set up runs from that set-up."""
+        of the run kept.  A pair that :meth:`locate` set up runs from that set-up.
+        ``anchor``: a left-view :class:`~lss_kernels.start_types.Point` the object must hold
+        (:attr:`~lss_kernels.checks.pair.CheckedPair.anchor`; None: the pair's own)."""
         from .checks.pair import CheckedPair
         from .checks.recovery import with_recovery
         pair = self._primed_pair(left, init, init_frame)
         if pair is None:
             pair = CheckedPair(left, right, d_max, init, init_frame, params)
+        if anchor is not None:
+            pair.anchor = anchor
 
         def run(p):
             result, solver = self._run(pair, p, callback)

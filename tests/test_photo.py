@@ -56,9 +56,9 @@ def test_the_window_follows_the_object_until_it_holds_it():
     second = Window(first.x0, 60 - MARGIN, 460 + MARGIN + 1, first.y1)
     calls = []
 
-    def run(l, r, start):
+    def run(l, r, start, anchor):
         window = (first, second)[len(calls)]
-        calls.append((l.shape[:2], start))
+        calls.append((l.shape[:2], start, anchor))
         return _result(window.crop(truth), disparity=30.0), None
     result, _ = solve_in_windows(run, left, left, 64.0, Point(300, 200))
     assert [c[0] for c in calls] == [first.shape, second.shape]
@@ -66,6 +66,9 @@ def test_the_window_follows_the_object_until_it_holds_it():
     # the second solve starts from the object found in the first, in its own window
     assert calls[1][1].shape == second.shape
     assert calls[1][1].sum() == first.crop(truth).sum()
+    # ... and the object must still hold the click, in the second window's pixels
+    assert [c[2] for c in calls] == [Point(300 - first.x0, 200 - first.y0),
+                                     Point(300 - second.x0, 200 - second.y0)]
     assert result.window == second.as_tuple()
     assert [w["touched"] for w in result.recovery["windows"]] == [["right"], []]
     assert result.disparity.shape == shape and np.isinf(result.disparity[0, -1])
@@ -91,7 +94,7 @@ def test_a_points_window_is_the_one_around_its_located_start():
         located.append((l.shape[:2], start))
         return reach.crop(region)
 
-    def run(l, r, start):
+    def run(l, r, start, anchor):
         solved.append((l.shape[:2], start))
         return _result(tight.crop(region)), None
     result, _ = solve_in_windows(run, left, left, 64.0, Point(300, 200), locate)
@@ -118,7 +121,7 @@ def test_a_located_window_almost_as_large_as_the_reach_is_not_taken():
         region[10:-10, 40:-10] = True
         return region
 
-    def run(l, r, start):
+    def run(l, r, start, anchor):
         shapes.append(l.shape[:2])
         return _result(np.zeros(l.shape[:2], bool)), None
     result, _ = solve_in_windows(run, left, left, 32.0, Point(250, 150), locate)
@@ -130,7 +133,7 @@ def test_a_point_with_no_start_found_keeps_its_reach():
     left = np.zeros(SHAPE + (3,), np.float32)
     shapes = []
 
-    def run(l, r, start):
+    def run(l, r, start, anchor):
         shapes.append(l.shape[:2])
         return _result(np.zeros(l.shape[:2], bool)), None
     solve_in_windows(run, left, left, 32.0, Point(250, 150),
@@ -143,7 +146,7 @@ def test_the_window_stops_growing_after_max_windows():
     left = np.zeros(SHAPE + (3,), np.float32)
     calls = []
 
-    def run(l, r, start):         # an object that always fills its window
+    def run(l, r, start, anchor):         # an object that always fills its window
         calls.append(1)
         return _result(np.ones(l.shape[:2], bool)), None
     result, _ = solve_in_windows(run, left, left, 32.0, Box(200, 100, 240, 140))
@@ -153,7 +156,7 @@ def test_the_window_stops_growing_after_max_windows():
 def test_auto_solves_the_whole_photo():
     left = np.zeros(SHAPE + (3,), np.float32)
 
-    def run(l, r, start):
+    def run(l, r, start, anchor):
         assert start == "auto" and l.shape[:2] == SHAPE
         fg = np.zeros(SHAPE, bool)
         fg[100:150, 200:260] = True

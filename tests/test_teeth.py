@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lss_kernels import Params
+from lss_kernels import Params, Point
 from lss_kernels.checks import comb, outline, teeth
 from lss_kernels.checks.pair import CheckedPair
 from lss_kernels.checks.recovery import with_recovery
@@ -144,9 +144,10 @@ def swapped(scene, d_fg, d_bg):
                            recovery={})
 
 
-def solved_as(scene, model):
+def solved_as(scene, model, anchor=None):
     pair = CheckedPair(scene.left, scene.right, scene.d_max, tuple(scene.init_ellipse), "left",
                        Params())
+    pair.anchor = anchor
     return with_recovery(lambda p: (model(), None), Params(), pair.d_max, pair)[0]
 
 
@@ -169,6 +170,37 @@ def test_layers_swapped_over_a_weak_background_are_read_again_from_the_pair(
     assert score(result.surface, result.occlusion, scene)["occ_f1"] > 0.9
     assert result.recovery["tooth"]["outline"]["taken"]
     assert (np.asarray(result.phi) > 0).mean() == pytest.approx(fg.mean(), abs=0.02)
+
+
+def test_the_outline_read_from_the_pair_must_hold_the_click(ti_arch, weak_background):
+    # a click (the pair's anchor) on the object, whose depth the solve has right: the
+    # outline and the background read from the pair are taken
+    scene = weak_background
+    click = Point(84.0, 60.0)
+    right_depth = lambda: swapped(scene, D_FG, D_FG + 3 * P_FG)
+    assert right_depth().foreground[60, 84]
+    result = solved_as(scene, right_depth, click)
+    assert result.recovery["tooth"]["outline"]["taken"]
+    assert result.recovery["tooth"]["outline"]["anchored"]
+    assert score(result.surface, result.occlusion, scene)["occ_f1"] > 0.9
+    # no outline holds a click on the background (in a whole photo the planes can explain
+    # another object than the one clicked): the model stays as solved
+    model = right_depth()
+    assert not scene.fg_left[10, 10]
+    result = solved_as(scene, lambda: model, Point(10.0, 10.0))
+    assert result.recovery["tooth"]["outline"] is None
+    assert np.array_equal(result.foreground, model.foreground)
+    # nor is the object's surface at the click moved by more than ANCHOR_DEPTH: two teeth
+    # (8.8 px) are another surface.  Without a click the object goes to its true tooth;
+    # with one it keeps the depth solved there, and only its outline and the background
+    # are read again
+    left, right = scene.left, scene.right
+    two_teeth = lambda: swapped(scene, D_FG + 2 * P_FG, D_FG + 5 * P_FG)
+    found = outline.on_layers(two_teeth(), left, right, scene.d_max)
+    assert found["taken"] and found["front"] == pytest.approx(D_FG, abs=0.5)
+    found = outline.on_layers(two_teeth(), left, right, scene.d_max, click)
+    assert found["taken"] and found["front"] == pytest.approx(D_FG + 2 * P_FG, abs=0.5)
+    assert found["back"] == pytest.approx(D_BG, abs=0.5)
 
 
 def test_a_background_in_front_on_two_periods_gives_the_object_its_outline(ti_arch,

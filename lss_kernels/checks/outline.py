@@ -25,6 +25,17 @@ read from the right pixels.  :func:`on_layers` takes the
 best when its warp explains the right image better than the solved model
 (:func:`~lss_kernels.checks.recovery.with_recovery` calls it after each solve of a periodic
 pair, after :func:`~lss_kernels.checks.teeth.on_tooth`).
+
+In a whole photo the same planes can explain another object better than the one asked
+for.  In the window around a click (:mod:`lss_kernels.photo`, the pair's ``anchor``), only
+the pairs whose outline holds the clicked pixel, with the object's surface there within
+``ANCHOR_DEPTH`` of the depth the solve found (already on its tooth), and lies within
+``REACH`` of the solved object's box, are candidates: what the check may change is the
+outline and the background, not which object was clicked.
+Elsewhere layers read on a comb's plane must explain the pair to ``COMB_FIT``: over a whole
+photo's many surfaces an outline that holds the click can still spread over the rows of
+others (``multi_handle`` of ``lss_kernels.stress --multi``, seed 0, solved over the whole
+image from its click: F1 0.81 with the limit, 0.24 with the anchor instead).
 """
 import numpy as np
 
@@ -33,8 +44,8 @@ from .comb import combs
 from .teeth import (HIDDEN_COST, MIN_GAIN, MIN_JUMP, UPSAMPLE, _coefficients, _eroded, _plane,
                     _sample, _teeth, plane_of, upsampled, warp_cost)
 
-__all__ = ["COMB_FIT", "INNER", "OUTER", "REACH", "ROUNDS", "choose_layers", "on_layers",
-           "pixel_costs", "row_outline"]
+__all__ = ["ANCHOR_DEPTH", "COMB_FIT", "INNER", "OUTER", "REACH", "ROUNDS", "choose_layers",
+           "on_layers", "pixel_costs", "row_outline"]
 
 #: Rounds of the search: each reads the teeth from the regions of the last round's outline.
 ROUNDS = 2
@@ -50,6 +61,12 @@ REACH = 32
 #: ``lss_kernels.stress --multi``, seed 0: 0.055 against 0.141, the object's outline
 #: spread over the background's rows, F1 0.79 -> 0.23).
 COMB_FIT = HIDDEN_COST / 4
+#: Largest change (left-view pixels) of the object's surface at the click that
+#: :func:`on_layers` takes.  Below the periods of the rendered sets' stripes (4.1 px and
+#: more), so a layer a tooth or more away is never taken for the clicked one; on the
+#: multi-object family the outlines that kept the clicked object changed its depth there by
+#: 0.1-2.1 px, those that took another surface by 7.3 px or more.
+ANCHOR_DEPTH = 3.0
 #: Erosions (4-neighbour) of the object's region, and of the rest, over which a layer's
 #: teeth are read: a solved outline that is off puts the other layer's texture near it.
 INNER, OUTER = 3, 6
@@ -159,14 +176,18 @@ def _combed(left, right, shape, d_max):
     return layers
 
 
-def choose_layers(left, right, foreground, surface, d_max):
+def choose_layers(left, right, foreground, surface, d_max, anchor=None):
     """The pair of layer teeth, and the outline (:func:`row_outline`), that explain the pair
     best, as the module text says.  ``left`` ``(H, W, C)``, ``right`` upsampled as in
     :func:`pixel_costs`; ``foreground`` bool and ``surface`` ``(H, W)``, the solved model
-    (left view).  Returns ``(mask, front, back, cost, combed)``, ``front`` and ``back``
-    planes on the whole grid, ``combed`` whether either is a comb's plane or fitted to a
-    comb's outline; None when no pair has the object in front."""
+    (left view); ``anchor``: a click (left-view point) that the outline must hold, with the
+    object's surface there within ``ANCHOR_DEPTH`` of ``surface``'s, and within ``REACH``
+    of the solved object's box also on a comb's plane.  Returns ``(mask,
+    front, back, cost, combed)``, ``front`` and ``back`` planes on the whole grid,
+    ``combed`` whether either is a comb's plane or fitted to a comb's outline; None when no
+    pair has the object in front (and holds the anchor)."""
     best = None
+    solved = surface
     allowed = _near(foreground, REACH)
     combed = _combed(left, right, foreground.shape, d_max)
     for _ in range(ROUNDS):
@@ -187,15 +208,20 @@ def choose_layers(left, right, foreground, surface, d_max):
 
         found = None
         for front, front_teeth, support in fronts:
-            near = allowed if support is None else allowed | _near(support, REACH)
+            # a lost solve's object may lie anywhere a comb's plane holds; a clicked one
+            # lies where the solve put it
+            near = allowed if support is None or anchor is not None else (
+                allowed | _near(support, REACH))
             for back, back_teeth, _ in backs:
                 jump = np.median((front - back)[foreground])
                 for r in back_teeth:
                     for s in front_teeth:
-                        if jump + s - r < MIN_JUMP:
+                        if jump + s - r < MIN_JUMP or not _keeps(front + s, solved, anchor):
                             continue
                         mask, cost = _outline(cost_of(front, s), cost_of(back, r),
                                               front + s - back - r, near)
+                        if anchor is not None and not _holds(mask, anchor):
+                            continue
                         if found is None or cost < found[3]:
                             combed_pair = support is not None or any(
                                 back is plane for plane, _, _ in fitted)
@@ -209,13 +235,15 @@ def choose_layers(left, right, foreground, surface, d_max):
     return best
 
 
-def on_layers(result, left, right, d_max):
+def on_layers(result, left, right, d_max, anchor=None):
     """``result`` (a :class:`~lss_kernels.result.Result` of the pair ``left``, ``right``,
     after :func:`~lss_kernels.checks.teeth.on_tooth`) replaced in place by the layers and
     outline that :func:`choose_layers` reads from the pair when their warp
     (:func:`~lss_kernels.checks.teeth.warp_cost`) differs from the right image by
-    ``MIN_GAIN`` less than ``result``'s does (and, for layers read on a comb's plane, by
-    at most ``COMB_FIT``): the two planes as the surfaces (the refined
+    ``MIN_GAIN`` less than ``result``'s does (given an ``anchor``, a left-view
+    :class:`~lss_kernels.start_types.Point` such as a whole photo's click, only layers that
+    keep the clicked object are read; without one, layers read on a comb's plane must
+    explain the pair to ``COMB_FIT``: module text): the two planes as the surfaces (the refined
     disparity kept where a pixel's layer and surface are unchanged, to half a pixel),
     Theta_1 and Theta_2 the planes in the cyclopean frame, phi ``PHI_SCALE`` times the
     signed distance along each row to the outline moved to the cyclopean frame, the
@@ -229,16 +257,16 @@ def on_layers(result, left, right, d_max):
     right = upsampled(right)
     foreground = np.asarray(result.foreground, bool)
     solved = np.asarray(result.surface, np.float64)
-    found = choose_layers(left, right, foreground, solved, d_max)
+    found = choose_layers(left, right, foreground, solved, d_max, anchor)
     if found is None:
         return None
     mask, front, back, _, combed = found
     surface = np.where(mask, front, back)
     before = warp_cost(left, right, foreground, solved, UPSAMPLE)[0]
     after = warp_cost(left, right, mask, surface, UPSAMPLE)[0]
-    taken = bool(after < (1.0 - MIN_GAIN) * before and mask.any()
-                 and (not combed or after <= COMB_FIT))
-    info = {"cost_before": before, "cost": after, "taken": taken,
+    kept = anchor is not None or (mask.any() and (not combed or after <= COMB_FIT))
+    taken = bool(after < (1.0 - MIN_GAIN) * before and kept)
+    info = {"cost_before": before, "cost": after, "taken": taken, "anchored": anchor is not None,
             "front": float(np.median(front[mask])) if mask.any() else None,
             "back": float(np.median(back[~mask]))}
     if not taken:
@@ -258,6 +286,28 @@ def on_layers(result, left, right, d_max):
         setattr(result, name, theta.astype(np.asarray(getattr(result, name)).dtype))
     result.phi = _row_distance(mask, front).astype(np.float32)
     return info
+
+
+def _pixel(anchor, shape):
+    """The pixel ``(y, x)`` nearest ``anchor`` (a left-view point), or None outside
+    ``shape``."""
+    y, x = int(round(anchor.y)), int(round(anchor.x))
+    return (y, x) if 0 <= y < shape[0] and 0 <= x < shape[1] else None
+
+
+def _keeps(front, solved, anchor) -> bool:
+    """Whether the surface ``front`` lies within ``ANCHOR_DEPTH`` of ``solved`` at
+    ``anchor`` (None: anywhere)."""
+    if anchor is None:
+        return True
+    pixel = _pixel(anchor, front.shape)
+    return pixel is not None and abs(front[pixel] - solved[pixel]) <= ANCHOR_DEPTH
+
+
+def _holds(mask, anchor) -> bool:
+    """Whether ``mask`` holds the pixel of ``anchor``."""
+    pixel = _pixel(anchor, mask.shape)
+    return pixel is not None and bool(mask[pixel])
 
 
 def _row_distance(mask, front):

@@ -215,8 +215,8 @@ def _on_tooth(run, pair, record):
     """``run`` whose results are moved to the foreground's tooth
     (:func:`~lss_kernels.checks.teeth.on_tooth`), what was found recorded as ``tooth``,
     then, on a periodic object, given the layers and outline read row by row from the pair
-    when they explain it better (:func:`~lss_kernels.checks.outline.on_layers`, recorded
-    as ``tooth["outline"]``)."""
+    when they explain it better and hold the pair's anchor
+    (:func:`~lss_kernels.checks.outline.on_layers`, recorded as ``tooth["outline"]``)."""
     from .outline import on_layers
     from .teeth import on_tooth
 
@@ -224,7 +224,8 @@ def _on_tooth(run, pair, record):
         result, extra = run(p)
         result, record["tooth"] = on_tooth(result, pair.left, pair.right, pair.d_max)
         if record["tooth"].get("period") is not None:
-            record["tooth"]["outline"] = on_layers(result, pair.left, pair.right, pair.d_max)
+            record["tooth"]["outline"] = on_layers(result, pair.left, pair.right, pair.d_max,
+                                                   pair.anchor)
         return result, extra
     return moved
 
