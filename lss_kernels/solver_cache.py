@@ -29,14 +29,13 @@ class SolverCache:
         the left image, the initial foreground (left view) and the initialisation's report
         of the run kept.  A pair that :meth:`locate` set up runs from that set-up.
         ``anchor``: a left-view :class:`~lss_kernels.start_types.Point` the object must hold
-        (:attr:`~lss_kernels.checks.pair.CheckedPair.anchor`; None: the pair's own)."""
+        (:attr:`~lss_kernels.checks.pair.CheckedPair.anchor`; None: none)."""
         from .checks.pair import CheckedPair
         from .checks.recovery import with_recovery
         pair = self._primed_pair(left, init, init_frame)
         if pair is None:
             pair = CheckedPair(left, right, d_max, init, init_frame, params)
-        if anchor is not None:
-            pair.anchor = anchor
+        pair.anchor = anchor
 
         def run(p):
             result, solver = self._run(pair, p, callback)

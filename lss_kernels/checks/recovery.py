@@ -215,8 +215,8 @@ def _on_tooth(run, pair, record):
     """``run`` whose results are moved to the foreground's tooth
     (:func:`~lss_kernels.checks.teeth.on_tooth`), what was found recorded as ``tooth``,
     then, on a periodic object, given the layers and outline read row by row from the pair
-    when they explain it better and hold the pair's anchor
-    (:func:`~lss_kernels.checks.outline.on_layers`, recorded as ``tooth["outline"]``)."""
+    when they explain it better and keep the pair's anchor (a whole photo's click:
+    :func:`~lss_kernels.checks.outline.on_layers`, recorded as ``tooth["outline"]``)."""
     from .outline import on_layers
     from .teeth import on_tooth
 
