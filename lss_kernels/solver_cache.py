@@ -29,18 +29,17 @@ class SolverCache:
         the left image, the initial foreground (left view) and the initialisation's report
         of the run kept.  A pair that :meth:`locate` set up runs from that set-up.
         ``anchor``: a left-view :class:`~lss_kernels.start_types.Point` the object must hold
-        (:attr:`~lss_kernels.checks.pair.CheckedPair.anchor`; None: none)."""
+        (:func:`~lss_kernels.checks.recovery.with_recovery`; None: none)."""
         from .checks.pair import CheckedPair
         from .checks.recovery import with_recovery
         pair = self._primed_pair(left, init, init_frame)
         if pair is None:
             pair = CheckedPair(left, right, d_max, init, init_frame, params)
-        pair.anchor = anchor
 
         def run(p):
             result, solver = self._run(pair, p, callback)
             return result, (solver.left_image, solver.initial_left, solver.init_info)
-        return with_recovery(run, params, pair.d_max, pair)
+        return with_recovery(run, params, pair.d_max, pair, anchor)
 
     def locate(self, left, right, d_max, start, params):
         """The initial foreground (left view) that a solve of the pair with ``params``

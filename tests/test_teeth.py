@@ -147,8 +147,7 @@ def swapped(scene, d_fg, d_bg):
 def solved_as(scene, model, anchor=None):
     pair = CheckedPair(scene.left, scene.right, scene.d_max, tuple(scene.init_ellipse), "left",
                        Params())
-    pair.anchor = anchor
-    return with_recovery(lambda p: (model(), None), Params(), pair.d_max, pair)[0]
+    return with_recovery(lambda p: (model(), None), Params(), pair.d_max, pair, anchor)[0]
 
 
 def test_the_row_outline_of_the_true_surfaces_is_the_object(two_periods):

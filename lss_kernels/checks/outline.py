@@ -27,7 +27,7 @@ best when its warp explains the right image better than the solved model
 pair, after :func:`~lss_kernels.checks.teeth.on_tooth`).
 
 In a whole photo the same planes can explain another object better than the one asked
-for.  In the window around a click (:mod:`lss_kernels.photo`, the pair's ``anchor``), only
+for.  In the window around a click (:mod:`lss_kernels.photo`: the ``anchor``), only
 the pairs whose outline holds the clicked pixel, with the object's surface there within
 ``ANCHOR_DEPTH`` of the depth the solve found (already on its tooth), and lies within
 ``REACH`` of the solved object's box, are candidates: what the check may change is the
@@ -187,7 +187,10 @@ def choose_layers(left, right, foreground, surface, d_max, anchor=None):
     ``combed`` whether either is a comb's plane or fitted to a comb's outline; None when no
     pair has the object in front (and holds the anchor)."""
     best = None
-    solved = surface
+    pixel = None if anchor is None else _pixel(anchor, foreground.shape)
+    if anchor is not None and pixel is None:
+        return None
+    solved_there = None if pixel is None else float(surface[pixel])
     allowed = _near(foreground, REACH)
     combed = _combed(left, right, foreground.shape, d_max)
     for _ in range(ROUNDS):
@@ -212,15 +215,18 @@ def choose_layers(left, right, foreground, surface, d_max, anchor=None):
             # lies where the solve put it
             near = allowed if support is None or anchor is not None else (
                 allowed | _near(support, REACH))
+            if pixel is not None:        # the object's depth at the click kept
+                front_teeth = [s for s in front_teeth
+                               if abs(front[pixel] + s - solved_there) <= ANCHOR_DEPTH]
             for back, back_teeth, _ in backs:
                 jump = np.median((front - back)[foreground])
                 for r in back_teeth:
                     for s in front_teeth:
-                        if jump + s - r < MIN_JUMP or not _keeps(front + s, solved, anchor):
+                        if jump + s - r < MIN_JUMP:
                             continue
                         mask, cost = _outline(cost_of(front, s), cost_of(back, r),
                                               front + s - back - r, near)
-                        if anchor is not None and not _holds(mask, anchor):
+                        if pixel is not None and not mask[pixel]:
                             continue
                         if found is None or cost < found[3]:
                             combed_pair = support is not None or any(
@@ -293,21 +299,6 @@ def _pixel(anchor, shape):
     ``shape``."""
     y, x = int(round(anchor.y)), int(round(anchor.x))
     return (y, x) if 0 <= y < shape[0] and 0 <= x < shape[1] else None
-
-
-def _keeps(front, solved, anchor) -> bool:
-    """Whether the surface ``front`` lies within ``ANCHOR_DEPTH`` of ``solved`` at
-    ``anchor`` (None: anywhere)."""
-    if anchor is None:
-        return True
-    pixel = _pixel(anchor, front.shape)
-    return pixel is not None and abs(front[pixel] - solved[pixel]) <= ANCHOR_DEPTH
-
-
-def _holds(mask, anchor) -> bool:
-    """Whether ``mask`` holds the pixel of ``anchor``."""
-    pixel = _pixel(anchor, mask.shape)
-    return pixel is not None and bool(mask[pixel])
 
 
 def _row_distance(mask, front):

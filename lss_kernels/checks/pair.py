@@ -37,17 +37,12 @@ class CheckedPair:
     d_max : float
     init : tuple of 4 float, ndarray bool ``(H, W)``, ``"auto"``, Point or Box
     init_frame : {"left", "cyclopean"}
-    anchor : Point or None
-        A left-view pixel that the object must hold: a whole photo's click, which
-        :mod:`lss_kernels.photo` sets in each window it solves (None otherwise).  The
-        outline check keeps to it (:func:`~lss_kernels.checks.outline.on_layers`).
     """
 
     def __init__(self, left, right, d_max, init, init_frame, params):
         self.left, self.right, self.d_max, self.init = check_inputs(
             left, right, d_max, init, init_frame, check_params(params))
         self.init_frame = init_frame
-        self.anchor = None
         self.grey = luma(self.left), luma(self.right)
 
     @classmethod

@@ -211,11 +211,11 @@ def _check_matches(pair) -> tuple:
     return direction, reach
 
 
-def _on_tooth(run, pair, record):
+def _on_tooth(run, pair, record, anchor):
     """``run`` whose results are moved to the foreground's tooth
     (:func:`~lss_kernels.checks.teeth.on_tooth`), what was found recorded as ``tooth``,
     then, on a periodic object, given the layers and outline read row by row from the pair
-    when they explain it better and keep the pair's anchor (a whole photo's click:
+    when they explain it better and keep ``anchor`` (a whole photo's click, or None:
     :func:`~lss_kernels.checks.outline.on_layers`, recorded as ``tooth["outline"]``)."""
     from .outline import on_layers
     from .teeth import on_tooth
@@ -225,12 +225,12 @@ def _on_tooth(run, pair, record):
         result, record["tooth"] = on_tooth(result, pair.left, pair.right, pair.d_max)
         if record["tooth"].get("period") is not None:
             record["tooth"]["outline"] = on_layers(result, pair.left, pair.right, pair.d_max,
-                                                   pair.anchor)
+                                                   anchor)
         return result, extra
     return moved
 
 
-def with_recovery(run, params, d_max, pair=None):
+def with_recovery(run, params, d_max, pair=None, anchor=None):
     """``run(params) -> (result, extra)`` once, and again when the model collapsed (and
     ``params.recover``); returns the ``(result, extra)`` kept, with ``result.recovery`` set.
 
@@ -244,7 +244,9 @@ def with_recovery(run, params, d_max, pair=None):
     None: the defaults; ``d_max``: the searched range (left-view pixels).  With ``pair``,
     it is first checked for swapped views and a search range that is too short
     (:mod:`lss_kernels.checks.direction`, recorded as ``direction`` and ``range``): a
-    :class:`SwappedViewsWarning` or a :class:`ShortRangeWarning` says so before the solve."""
+    :class:`SwappedViewsWarning` or a :class:`ShortRangeWarning` says so before the solve.
+    ``anchor``: a left-view :class:`~lss_kernels.start_types.Point` that the object must
+    hold after the outline check of a periodic pair (a whole photo's click; None: none)."""
     from ..params import Params
     params = Params() if params is None else params
     record = {}
@@ -257,7 +259,7 @@ def with_recovery(run, params, d_max, pair=None):
         if fraction >= PERIODIC_AREA:
             first_params, second_params = params.replace(**PERIODIC), params
             record["first_params"] = dict(PERIODIC)
-            run = _on_tooth(run, pair, record)
+            run = _on_tooth(run, pair, record, anchor)
     try:
         result, extra = run(first_params)
     except InitError as error:
