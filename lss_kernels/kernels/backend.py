@@ -152,6 +152,11 @@ def init(arch: str | None = None, threads: int | None = None, offline_cache: boo
         # a kernel's body and take about half the compile time of the median's selection
         # network, for no speed on the CPU: LLVM's own passes do the same there
         kwargs["cfg_optimization"] = False
+        # nor do its "advanced" IR passes (whole-kernel CSE, loop-invariant motion, ...):
+        # without them a kernel compiles in about 60 % of the time (a paper15 solve's 32:
+        # about 15 s instead of 25 s on 2 cores), LLVM optimises what they would have, and
+        # the iteration runs as fast; float results may differ in the last bits
+        kwargs["advanced_optimization"] = False
     if arch != "cpu":
         kwargs["enable_fallback"] = False
     taichi_patches.install()
