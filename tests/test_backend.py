@@ -176,6 +176,19 @@ def test_offline_cache_holds_a_gigabyte_unless_the_environment_says(ti_arch):
     assert limit(TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES="12345") == 12345
 
 
+def test_the_cpu_compiles_without_taichis_cfg_and_advanced_passes(ti_arch):
+    """LLVM does their work on the CPU; without them a kernel compiles in about 60 % of the
+    time (``backend.init``, docs/design.md)."""
+    import subprocess
+    import sys
+    code = ("from lss_kernels.kernels import backend; import taichi as ti; "
+            "backend.init('cpu'); c = ti.lang.impl.current_cfg(); "
+            "print(c.cfg_optimization, c.advanced_optimization)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    assert done.stdout.split()[-2:] == ["False", "False"]
+
+
 def test_auto_runs_on_the_cpu_with_one_line_when_no_gpu_answers(monkeypatch):
     from lss_kernels.kernels import backend
     monkeypatch.setattr(backend, "probe", lambda arch: (False, "no cuda driver library"))
