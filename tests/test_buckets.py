@@ -152,7 +152,7 @@ print(json.dumps(entries))
 """
 
 #: Kernels of the script that compile once per size bucket, each launched once per size.
-BUCKET_KERNELS = ("_bucket_median", "_bucket_census", "_derivatives", "fit",
+BUCKET_KERNELS = ("_merge", "_bucket_census", "_derivatives", "fit",
                   "refresh_phi_plus", "render_left", "_distance_step", "net_change",
                   "_pass")
 
@@ -213,18 +213,78 @@ def test_a_second_size_of_a_bucket_compiles_none_of_the_bucket_kernels(two_sizes
 def test_filters_of_a_pool_share_the_tree_of_their_window(ti_arch):
     import taichi as ti
     from lss_kernels.kernels.backend import FieldPool
-    from lss_kernels.kernels.median import MedianFilter
+    from lss_kernels.kernels.median import SCRATCH, MedianFilter
     pool = FieldPool()
     a, b, c = (MedianFilter(pool, 30, 40, k) for k in (7, 7, 5))
     other = MedianFilter(pool, 100, 40, 7)                  # another bucket
+    taller = MedianFilter(pool, SCRATCH[0] + 1, 40, 7)      # beyond the scratch
     pool.field(ti.f32, (1,))
     pool.finalize()
     try:
-        assert a._tree is b._tree
-        assert c._tree is not a._tree and other._tree is not a._tree
+        assert a._tree is b._tree and other._tree is a._tree
+        assert c._tree is not a._tree and taller._tree is not a._tree
         assert a.bucket == (64, 64) and other.bucket == (128, 64)
     finally:
         pool.destroy()
+
+
+# One median filter at sizes of two buckets, and one taller than the merge tree's scratch,
+# each followed by backend.restart (which writes the offline cache): the .tic files that
+# hold the tree's kernel after each size.
+MERGE_SCRIPT = r"""
+import json, sys
+from pathlib import Path
+import numpy as np
+import taichi as ti
+from lss_kernels.kernels import backend
+from lss_kernels.kernels.backend import FieldPool
+from lss_kernels.kernels.median import SCRATCH, Assign, MedianFilter
+
+cache, out = Path(sys.argv[1]), Path(sys.argv[2])
+backend.init("cpu", threads=1, offline_cache=True)
+rng = np.random.default_rng(9)
+results, entries = {}, []
+for h, w in ((37, 53), (150, 100), (SCRATCH[0] + 9, 21)):
+    pool = FieldPool()
+    extent = pool.extent(h, w)
+    src = pool.field(ti.f32, extent.bucket, bucket=True)
+    dst = pool.field(ti.f32, extent.bucket, bucket=True)
+    median = MedianFilter(pool, h, w, 7)
+    pool.finalize()
+    plane = np.round(rng.standard_normal((h, w)) * 2).astype(np.float32)
+    src.from_numpy(extent.padded(plane))
+    median.run(src, Assign(dst))
+    results[f"plane{h}x{w}"] = plane
+    results[f"median{h}x{w}"] = extent.image(dst)
+    pool.destroy()
+    backend.restart()
+    entries.append(sorted(p.name for p in cache.rglob("*.tic")
+                          if b'"name":"_merge_c' in p.read_bytes()))
+np.savez(out, **results)
+print(json.dumps(entries))
+"""
+
+
+def test_the_median_tree_compiles_once_for_every_bucket_that_fits_its_scratch(tmp_path,
+                                                                               ti_arch):
+    """Its cache entry after a second bucket is the first bucket's; an image taller than
+    :data:`~lss_kernels.kernels.median.SCRATCH` compiles it again.  The medians are the
+    reference's at every size."""
+    if ti_arch != "cpu":
+        pytest.skip("the offline cache is exercised on the CPU")
+    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=str(tmp_path / "cache"))
+    proc = subprocess.run([sys.executable, "-c", MERGE_SCRIPT, str(tmp_path / "cache"),
+                           str(tmp_path / "out.npz")], env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    small, other_bucket, taller = json.loads(proc.stdout.splitlines()[-1])
+    assert len(small) == 1 and other_bucket == small, (small, other_bucket)
+    assert len(taller) == 2, taller
+    out = dict(np.load(tmp_path / "out.npz"))
+    for name in (n for n in out if n.startswith("plane")):
+        size = name[len("plane"):]
+        np.testing.assert_array_equal(out[f"median{size}"],
+                                      ref.median_filter(out[name], 7))
 
 
 # Whole solves at two sizes of one bucket (96x128) and one search range, as `lss eval` runs

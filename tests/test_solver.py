@@ -158,15 +158,16 @@ def test_memory_stays_within_the_volume_budget(ti_arch):
     half, padded = solver.levelset.filters.half, solver.levelset.blocks * solver.levelset.lanes
     filter_margins = 3 * 2 * half * padded * 4 + (7 + 5 * levels) * H * (padded - W) * 4
     # the median's sorted columns (k per pixel) and its output plane, one set shared by the
-    # solver's 7x7 filters, have the shape of the image's size bucket, in blocks of lanes
+    # solver's 7x7 filters, have the shape of the merge tree's scratch, in blocks of lanes
     # rows over whole tiles of columns; the sorted columns also hold k // 2 reflected
-    # columns on either side; and the bucket's H and W
+    # columns on either side
+    from lss_kernels.kernels.median import scratch_shape
     k, ls = solver.params.median_size, solver.levelset.median
     assert solver.initialiser.median._tree is ls._tree
-    tile, (bucket_h, bucket_w) = ls._tree.network[1], ls.bucket
-    rows = -(-bucket_h // ls.lanes) * ls.lanes
-    columns = tile * -(-bucket_w // tile)
-    filter_margins += (k * rows * (columns + 2 * (k // 2)) + rows * columns) * 4 + 8
+    tile, (scratch_h, scratch_w) = ls._tree.network[1], scratch_shape(ls.bucket)
+    rows = -(-scratch_h // ls.lanes) * ls.lanes
+    columns = tile * -(-scratch_w // tile)
+    filter_margins += (k * rows * (columns + 2 * (k // 2)) + rows * columns) * 4
     # set-up scratch kept for the solver's life: B_occ's block of rows (as many values as
     # CHUNK planes, rounded up to whole rows) and a 2-D distance map, and the distance
     # transforms' line buffers (3 arrays of lines x longest axis): phi's (all lines of the

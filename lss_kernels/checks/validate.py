@@ -93,12 +93,15 @@ def check_range(d_max, width):
 def fields_bytes(height, width, d_max) -> int:
     """About the bytes of a solver's fields for a ``width x height`` pair searched to
     ``d_max`` (the default parameters; under what they hold): per pixel of the size
-    bucket, 640 bytes of planes and 16 bytes for each of the ``c_max`` candidates of the
-    volumes (measured at 256x192: 728 + 17.0 c_max)."""
+    bucket, 608 bytes of planes and 16 bytes for each of the ``c_max`` candidates of the
+    volumes (measured at 256x192: 696 + 17.0 c_max), and the median's scratch (25 MB up to
+    1024x768)."""
     from ..kernels.backend import bucket_shape
+    from ..kernels.median import scratch_bytes
     from ..params import c_max
     bucket_h, bucket_w = bucket_shape(int(height), int(width))
-    return bucket_h * bucket_w * (640 + 16 * c_max(d_max))
+    return (bucket_h * bucket_w * (608 + 16 * c_max(d_max))
+            + scratch_bytes((bucket_h, bucket_w)))
 
 
 def available_memory():

@@ -387,7 +387,7 @@ class FieldPool:
     and the owner calls :meth:`finalize` once everything is declared and :meth:`destroy` when
     done.  Fields cannot be read or written before :meth:`finalize`.
 
-    Three trees, because Taichi's offline cache keys a kernel on every tree it touches
+    Four trees, because Taichi's offline cache keys a kernel on every tree it touches
     (shapes and SNode ids):
 
     * the fields whose shape is the image's own size, finalised first (what the few kernels
@@ -398,7 +398,10 @@ class FieldPool:
     * the *bucket* fields (``bucket=True``), whose shapes are those of the image's size
       bucket (:func:`bucket_shape`), so that kernels that touch only them (and volumes of
       the bucket's shape) and read the image's size at run time from an :class:`Extent` --
-      most kernels of a solve -- compile once per bucket instead of once per size.
+      most kernels of a solve -- compile once per bucket instead of once per size;
+    * the *fixed* fields (``fixed=True``), whose shapes depend on nothing of the pair (the
+      median's merge scratch), so that a kernel that touches only them and takes the size
+      as arguments compiles once for every size and bucket.
 
     The SNode ids count the nodes declared before in the process, which depend neither on
     the range nor on the size.  An optional part of a solve (the refinement) takes an
@@ -408,7 +411,7 @@ class FieldPool:
 
     def __init__(self):
         # created on first use: Taichi refuses to run while a builder is not finalised
-        self._builders = [None, None, None]       # the size, volume and bucket trees
+        self._builders = [None] * 4     # the size, volume, bucket and fixed trees
         self._trees = []
         self._shared = {}
         self._loaders = []
@@ -455,13 +458,13 @@ class FieldPool:
         return self._shared[key]
 
     @staticmethod
-    def _tree(volume, bucket):
+    def _tree(volume, bucket, fixed=False):
         """The index of the tree of a field (checked before Taichi creates the field: one
         that is never placed stops every later kernel from compiling)."""
-        if volume and bucket:
-            raise ValueError("FieldPool: a field is in the volume tree or the bucket tree, "
-                             "not both")
-        return 2 if bucket else int(bool(volume))
+        if int(bool(volume)) + int(bool(bucket)) + int(bool(fixed)) > 1:
+            raise ValueError("FieldPool: a field is in one of the volume, bucket and fixed "
+                             "trees, not several")
+        return 3 if fixed else 2 if bucket else int(bool(volume))
 
     def _place(self, f, shape, offset, nbytes, order, tree):
         shape = tuple(int(s) for s in shape)
@@ -493,9 +496,10 @@ class FieldPool:
         tree = self._tree(volume, bucket)
         return self._place(ti.field(dtype), shape, offset, _bytes(dtype), order, tree)
 
-    def vector(self, n, dtype, shape, offset=None, bucket=False):
-        """A field of ``n``-vectors; ``bucket`` as for :meth:`field`."""
-        tree = self._tree(False, bucket)
+    def vector(self, n, dtype, shape, offset=None, bucket=False, fixed=False):
+        """A field of ``n``-vectors; ``bucket`` as for :meth:`field`; ``fixed``: its shape
+        depends on nothing of the pair (see the class)."""
+        tree = self._tree(False, bucket, fixed)
         return self._place(ti.Vector.field(n, dtype), shape, offset, n * _bytes(dtype), None,
                            tree)
 

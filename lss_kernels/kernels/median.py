@@ -9,9 +9,10 @@ sorting networks" (2021):
    the sorted columns the windows share only as far as the ranks that can still be a median
    (:func:`median_network`).
 
-The tree of stage 2 compiles once per *size bucket*
-(:func:`lss_kernels.kernels.backend.bucket_shape`), not once per image size, and once for
-all the filters of a pool with the same window: see :class:`MedianFilter`.
+The tree of stage 2 compiles once for every image of up to :data:`SCRATCH` (it touches only
+scratch of that one shape and reads the size at run time), and once for all the filters of a
+pool with the same window; the two other stages once per *size bucket*
+(:func:`lss_kernels.kernels.backend.bucket_shape`): see :class:`MedianFilter`.
 
 The filter writes through a *sink*: any ``ti.data_oriented`` object with a ``ti.func``
 ``begin()`` (run once, serially, before the pixels) and a ``ti.func`` ``store(y, x, value)``
@@ -24,7 +25,29 @@ from . import lanes
 from .backend import bucket_shape
 from .filters import reflect
 
-__all__ = ["Assign", "MedianFilter", "median_network"]
+__all__ = ["Assign", "MedianFilter", "SCRATCH", "median_network", "scratch_bytes",
+           "scratch_shape"]
+
+#: Rows and columns of the merge tree's scratch for every image that fits in them: its
+#: kernel, seconds to compile for a 7x7 window, then compiles once for all their size
+#: buckets (a larger image takes its bucket's side).  32 bytes a pixel for a 7x7 window:
+#: 25 MB, whatever the image.
+SCRATCH = (768, 1024)
+
+
+def scratch_shape(bucket) -> tuple:
+    """The shape of the merge tree's scratch for images of size bucket ``bucket``:
+    :data:`SCRATCH`, or the bucket's side where it is larger."""
+    return tuple(max(int(b), s) for b, s in zip(bucket, SCRATCH))
+
+
+def scratch_bytes(bucket, size: int = 7) -> int:
+    """Bytes of the merge tree's scratch of a ``size x size`` filter for images of size
+    bucket ``bucket``: ``size`` sorted ranks and a median a pixel, and ``size // 2``
+    reflected columns on either side (every side of a scratch is a whole number of blocks
+    of lanes and tiles of windows)."""
+    rows, columns = scratch_shape(bucket)
+    return 4 * rows * (size * (columns + 2 * (size // 2)) + columns)
 
 
 def _batcher(size, block=1):
@@ -242,38 +265,36 @@ class Assign:
 
 
 @ti.data_oriented
-class _BucketTree:
-    """Stage 2 of :class:`MedianFilter` for a size bucket: the medians of a tile of
-    horizontally adjacent windows from the sorted window columns, through the tree of
-    :func:`median_network`, in :meth:`_bucket_median`.
+class _MergeTree:
+    """Stage 2 of :class:`MedianFilter`: the medians of a tile of horizontally adjacent
+    windows from the sorted window columns, through the tree of :func:`median_network`, in
+    :meth:`_merge`.
 
-    Its fields are in the pool's bucket tree (see
-    :class:`lss_kernels.kernels.backend.FieldPool`): the plane's ``H`` and ``W``, the sorted
-    window columns and the medians of a block of rows, as lane vectors, each of the bucket's
-    shape.  The kernel touches only them and reads ``H`` and ``W`` at run time, so its code
-    and its offline-cache key are those of every size in the bucket.  The filters of a pool
-    with the same window and lanes share one (``pool.shared``): the solver's two 7x7 filters
-    compile the tree once.
+    Its fields are in the pool's fixed tree (see
+    :class:`lss_kernels.kernels.backend.FieldPool`): the sorted window columns and the
+    medians of a block of rows, as lane vectors, of the scratch's shape
+    (:func:`scratch_shape`).  The kernel touches only them and takes ``H`` and ``W`` as
+    arguments, so its code and its offline-cache key are those of every image that fits in
+    :data:`SCRATCH`.  The filters of a pool with the same window and lanes share one
+    (``pool.shared``): the solver's two 7x7 filters compile the tree once.
     """
 
-    def __init__(self, pool, bucket, size, lane_count):
+    def __init__(self, pool, shape, size, lane_count):
         self.median_size, self.lanes = int(size), int(lane_count)
         self.network = median_network(self.median_size)
         tile, k, L = self.network[1], self.median_size, self.lanes
-        blocks = lanes.block_count(bucket[0], L)
-        columns = lanes.block_count(bucket[1], tile) * tile
-        # H and W of the plane whose columns were sorted last (MedianFilter._sort)
-        self.size = pool.field(ti.i32, (2,), bucket=True)
+        blocks = lanes.block_count(shape[0], L)
+        columns = lanes.block_count(shape[1], tile) * tile
         # the sorted window columns in blocks of ``lanes`` rows (rank r of row
         # ``yb lanes + l`` at r * lanes + l), every column of the tiles and ``k // 2``
         # reflected columns on either side: the merge runs in SIMD lanes over the rows of a
         # block and reads a tile's columns at compile-time offsets, unreflected
         self.sorted = pool.vector(k * L, ti.f32, (blocks, columns + 2 * (k // 2)),
-                                  offset=(0, -(k // 2)), bucket=True)
+                                  offset=(0, -(k // 2)), fixed=True)
         # the medians of a block's rows, stored whole: LLVM packs the tree's comparators
         # into SIMD lanes only from stores of whole vectors (scalar stores into the output's
         # rows left them scalar, 9.4 ms against 8.3 for the tile of one row)
-        self.medians = pool.vector(L, ti.f32, (blocks, columns), bucket=True)
+        self.medians = pool.vector(L, ti.f32, (blocks, columns), fixed=True)
 
     @ti.func
     def apply(self, v: ti.template(), ops: ti.template()):
@@ -345,14 +366,13 @@ class _BucketTree:
         return [v[i] for i in ti.static(positions)]
 
     @ti.kernel
-    def _bucket_median(self):
-        """Stage 2 for the run-time ``H x W`` region only, a tile of windows of a block of
-        rows at a time.  Touches only bucket fields and reads nothing of the size at compile
+    def _merge(self, height: ti.i32, width: ti.i32):
+        """Stage 2 for the ``height x width`` region only, a tile of windows of a block of
+        rows at a time.  Touches only the scratch and reads nothing of the size at compile
         time."""
         L, tile, root = ti.static(self.lanes, self.network[1], self.network[2])
         columns_at, slots, ops, keep, children = ti.static(
             (root[0], root[2], root[3], root[4], root[5]))
-        height, width = self.size[0], self.size[1]
         for yb, t in ti.ndrange((height + L - 1) // L, (width + tile - 1) // tile):
             columns = [self._column(yb, t, c) for c in ti.static(columns_at)]
             v = self._load(slots, columns)
@@ -366,12 +386,13 @@ class _BucketTree:
 class MedianFilter:
     """The ``size x size`` median of ``(H, W)`` planes (``size`` odd; 1 is a copy).
 
-    Three kernels: :meth:`_sort` (stage 1: the sorted window columns, and the plane's size,
-    into the bucket fields of a :class:`_BucketTree`), the tree's ``_bucket_median`` (stage
-    2, the merge networks: seconds to compile for ``size`` 7) and :meth:`_store` (stage 3:
-    the medians into the sink).  All three read the image's size at run time from the pool's
-    :class:`~lss_kernels.kernels.backend.Extent`: they compile once per size bucket when the
-    planes they read and the sink's fields are in the bucket tree.
+    Three kernels: :meth:`_sort` (stage 1: the sorted window columns into the scratch of a
+    :class:`_MergeTree`), the tree's ``_merge`` (stage 2, the merge networks: seconds to
+    compile for ``size`` 7) and :meth:`_store` (stage 3: the medians into the sink).  All
+    three read the image's size at run time (the first and the last from the pool's
+    :class:`~lss_kernels.kernels.backend.Extent`, the tree as arguments): the first and the
+    last compile once per size bucket when the planes they read and the sink's fields are
+    in the bucket tree, the tree once for every image of up to :data:`SCRATCH`.
     """
 
     def __init__(self, pool, height, width, size):
@@ -381,9 +402,10 @@ class MedianFilter:
         self.extent = pool.extent(self.H, self.W)
         if self.median_size > 1:
             self.bucket = bucket_shape(self.H, self.W)
-            key = ("median", self.median_size, self.lanes, self.bucket)
-            self._tree = pool.shared(key, lambda: _BucketTree(pool, self.bucket,
-                                                              self.median_size, self.lanes))
+            shape = scratch_shape(self.bucket)
+            key = ("median", self.median_size, self.lanes, shape)
+            self._tree = pool.shared(key, lambda: _MergeTree(pool, shape, self.median_size,
+                                                             self.lanes))
             # the loops of the sort and the store run over the bucket's blocks of rows and
             # columns, skipping those past the image's (compile-time bounds: no run-time
             # division per index)
@@ -417,12 +439,10 @@ class MedianFilter:
 
     @ti.kernel
     def _sort(self, src: ti.template()):
-        """Stage 1: the sorted window columns of ``src`` (an ``(H, W)`` plane) and the
-        plane's size, into the bucket.  Sorting here rather than in the tree's kernel saves a
+        """Stage 1: the sorted window columns of ``src`` (an ``(H, W)`` plane) into the
+        tree's scratch.  Sorting here rather than in the tree's kernel saves a
         copy of the plane into the bucket: 0.3 ms of a 15 ms iteration at 400x300 on the
         2-core CPU."""
-        self._tree.size[0] = self.extent.height()
-        self._tree.size[1] = self.extent.width()
         self._sort_columns(src)
 
     @ti.kernel
@@ -453,10 +473,10 @@ class MedianFilter:
     def run(self, src, sink):
         """``sink.store(y, x, m)`` for every pixel, ``m`` the median of ``src`` (an ``(H, W)``
         plane) over the window centred there, symmetric borders.  Three launches (one for
-        ``size`` 1): :meth:`_sort`, the bucket's tree, :meth:`_store`.  Returns the sink's
-        ``end()``, two integers."""
+        ``size`` 1): :meth:`_sort`, the tree's :meth:`_MergeTree._merge`, :meth:`_store`.
+        Returns the sink's ``end()``, two integers."""
         if self.median_size == 1:
             return self._copy(src, sink)
         self._sort(src)
-        self._tree._bucket_median()
+        self._tree._merge(self.H, self.W)
         return self._store(sink)
