@@ -94,7 +94,7 @@ def fields_bytes(height, width, d_max) -> int:
     """About the bytes of a solver's fields for a ``width x height`` pair searched to
     ``d_max`` (the default parameters; under what they hold): per pixel of the size
     bucket, 608 bytes of planes and 16 bytes for each of the ``c_max`` candidates of the
-    volumes (measured at 256x192: 696 + 17.0 c_max), and the median's scratch (25 MB up to
+    volumes (measured at 256x192: 703 + 17.0 c_max), and the median's scratch (25 MB up to
     1024x768)."""
     from ..kernels.backend import bucket_shape
     from ..kernels.median import scratch_bytes
