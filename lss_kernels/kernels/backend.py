@@ -358,11 +358,13 @@ def bucket_size(n: int) -> int:
 
     Two buckets per octave: a side is rounded up by at most 1.5x (65 -> 96; an area by at
     most 2.25x, about 1.4x on average), and 2000x1500 takes 2048x1536, 1.05x its area, where
-    the next power of two (2048x2048) would take 1.4x, and up to 4x at other sizes.  The
-    bucket fields are the median's sorted columns and medians (32 bytes a bucket pixel, one
-    set shared by a pool's 7x7 filters) and the census's greys and words (24 bytes for both
-    views): ~0.25 GB at 2000x1500, against a solver's 4.8 GiB there with d_max 128.  Every
-    bucket side is a multiple of 32: whole blocks of 8 lanes and tiles of 4 windows.
+    the next power of two (2048x2048) would take 1.4x, and up to 4x at other sizes.  Beyond
+    1024x768 the median's sorted columns and medians take the bucket's shape too (32 bytes
+    a bucket pixel, one set shared by a pool's 7x7 filters; below, the fixed shape of
+    :data:`lss_kernels.kernels.median.SCRATCH`), as do the census's greys and words (24
+    bytes for both views): ~0.25 GB at 2000x1500, against a solver's 4.8 GiB there with
+    d_max 128.  Every bucket side is a multiple of 32: whole blocks of 8 lanes and tiles of
+    4 windows.
     """
     n = int(n)
     if n < 1:
