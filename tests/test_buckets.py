@@ -318,9 +318,11 @@ print(json.dumps(added))
 #: volumes, whose sums of children do; the ray cast, with B in the iteration's kernel; the
 #: upward pass).  The second list: those of the start's region (model/init.py, here an
 #: ellipse read as its box), whose fields have the image's own size, and the pool's transfer
-#: kernels, which move such fields.
+#: kernels, which move such fields.  The median's sort is not one of them: the start's
+#: d-bar is filtered from the median's source plane, which is the level set's and in the
+#: bucket tree.
 PER_SIZE_KERNELS = sorted(["_build_costs", "geometry", "upward"]
-                          + ["_region_pass", "_sort", "_store", "load", "read", "write"])
+                          + ["_region_pass", "_store", "load", "read", "write"])
 
 
 @pytest.mark.slow

@@ -276,7 +276,8 @@ class _MergeTree:
     (:func:`scratch_shape`).  The kernel touches only them and takes ``H`` and ``W`` as
     arguments, so its code and its offline-cache key are those of every image that fits in
     :data:`SCRATCH`.  The filters of a pool with the same window and lanes share one
-    (``pool.shared``): the solver's two 7x7 filters compile the tree once.
+    (``pool.shared``); a solver's start and level set share one 7x7 filter
+    (:meth:`MedianFilter.shared`).
     """
 
     def __init__(self, pool, shape, size, lane_count):
@@ -400,6 +401,9 @@ class MedianFilter:
         self.median_size = int(size)
         self.lanes = lanes.lanes_for_arch()
         self.extent = pool.extent(self.H, self.W)
+        #: a plane of the bucket tree for the users to write what they filter into
+        #: (:meth:`shared`)
+        self.source = pool.field(ti.f32, self.extent.bucket, bucket=True)
         if self.median_size > 1:
             self.bucket = bucket_shape(self.H, self.W)
             shape = scratch_shape(self.bucket)
@@ -468,6 +472,15 @@ class MedianFilter:
         for y, x in ti.ndrange(self.extent.height(), self.extent.width()):
             sink.store(y, x, src[y, x])
         return sink.end()
+
+    @classmethod
+    def shared(cls, pool, height, width, size) -> "MedianFilter":
+        """The ``size x size`` filter of ``pool`` that every user with that window shares:
+        each writes what it filters into :attr:`source` and calls ``run(filter.source,
+        sink)``, so that the sort compiles once for all of them (a kernel instance is one
+        per filter object and source plane).  Ask before the pool is finalised."""
+        return pool.shared(("median filter", int(size), int(height), int(width)),
+                           lambda: cls(pool, height, width, size))
 
     def run(self, src, sink):
         """``sink.store(y, x, m)`` for every pixel, ``m`` the median of ``src`` (an ``(H, W)``

@@ -189,7 +189,7 @@ class InitialRegion:
         self.inside = pool.field(ti.i32, (H, W))    # a region before widening or opening
         self.changed = pool.field(ti.i32, ())
         pool.host(self.d, self.label)
-        self.median = MedianFilter(pool, H, W, MEDIAN)
+        self.median = MedianFilter.shared(pool, H, W, MEDIAN)
         self.info, self.grown = {}, None
         #: widest layer in front of the object that a point's region is carried across
         #: (:meth:`_bridge`), cyclopean pixels; 0: none (the paper's two layers)
@@ -197,12 +197,16 @@ class InitialRegion:
 
     @ti.kernel
     def load(self, mean: ti.template(), precision: ti.template()):
+        """d-bar from the first consensus, also into the shared median's source
+        (:meth:`smooth`)."""
         for y, x in self.d:
             self.d[y, x] = mean[y, x] if precision[y, x] > 0 else -1.0
+            self.median.source[y, x] = self.d[y, x]
 
     def smooth(self):
-        """d-bar <- its ``MEDIAN`` squared median (symmetric borders; no match counts as -1)."""
-        self.median.run(self.d, Assign(self.d))
+        """d-bar <- its ``MEDIAN`` squared median (symmetric borders; no match counts as -1),
+        from the copy that :meth:`load` left in the median's source."""
+        self.median.run(self.median.source, Assign(self.d))
 
     # The start's passes are one kernel (:meth:`_launch`): each pass a parallel loop over the image that runs
     # for its own ``op`` only (the others' loops have no rows), with the pass's arguments.

@@ -100,7 +100,9 @@ class LevelSet:
         H, W = self.extent.bucket
         f = lambda: pool.field(ti.f32, (H, W), bucket=True)
         self.phi = f()
-        self.phi_next = f()
+        # phi after the Eq. 2 step, before its median: the shared median's source plane
+        self.median = MedianFilter.shared(pool, self.H, self.W, params.median_size)
+        self.phi_next = self.median.source
         self.b_map = f()
         self.D = f()                                   # Eq. 3, cyclopean units
         self.d_limit = pool.field(ti.f32, (), bucket=True)    # D is clamped to [0, c_max]
@@ -116,7 +118,6 @@ class LevelSet:
         self.reach = lanes.block_count(self.filters.half, self.lanes)
         block = lambda: pool.field(ti.i8, (H, lanes.block_count(W, self.lanes)), bucket=True)
         self.in_band, self.near_rows, self.near = block(), block(), block()
-        self.median = MedianFilter(pool, self.H, self.W, params.median_size)
         self.flipped = pool.field(ti.i32, (), bucket=True)
         self.changed = pool.field(ti.i32, (), bucket=True)
         self.boundary = pool.field(ti.i32, (), bucket=True)
