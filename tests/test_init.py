@@ -93,11 +93,22 @@ def test_region_growing_matches_the_specification(region, seed):
     np.testing.assert_array_equal(got, want)
 
 
-def test_smoothing_is_the_7x7_median(region):
+def test_smoothing_is_the_7x7_median_of_the_loaded_d_bar(region):
+    """``load`` writes d-bar (-1 where the consensus has no precision) into ``d`` and into
+    the median's source, which ``smooth`` filters into ``d``."""
+    import taichi as ti
+    from lss_kernels.kernels.backend import FieldPool
     d = _quantised_depths(5)
-    region.d.from_numpy(d)
+    pool = FieldPool()
+    mean, precision = (pool.field(ti.f32, d.shape) for _ in range(2))
+    pool.finalize()
+    mean.from_numpy(np.where(d >= 0, d, 99.0).astype(np.float32))
+    precision.from_numpy((d >= 0).astype(np.float32))
+    region.load(mean, precision)
+    np.testing.assert_array_equal(region.d.to_numpy(), d)
     region.smooth()
     np.testing.assert_array_equal(region.d.to_numpy(), ref.median_filter(d, 7))
+    pool.destroy()
 
 
 @pytest.mark.parametrize("radius", [1, 3])
