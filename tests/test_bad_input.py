@@ -449,6 +449,8 @@ def _cli(capsys, tmp_path, args, ti_arch):
     ("param_unknown", r"^--param: expected NAME=VALUE with a parameter of Params, "
                       r"got 'speed=2'$"),
     ("param_not_a_number", r"^--param beta: expected a float, got 'abc'$"),
+    ("param_tuple", r"^--param refine_passes: expected a tuple, written 24:7:8,4:4:2, got "
+                    r"'\(\(24,7,8\)\)'$"),
     ("iteration_cap", r"^params\.max_iterations: expected an integer >= 1, got 0$"),
     ("missing_scene", r"^scene: folder not found: "),
 ])
@@ -485,6 +487,7 @@ def test_cli_bad_input(case, message, capsys, tmp_path, pair_files, ti_arch):
         "param_mu_nan": [left, right, *good, "--param", "mu=nan"],
         "param_unknown": [left, right, *good, "--param", "speed=2"],
         "param_not_a_number": [left, right, *good, "--param", "beta=abc"],
+        "param_tuple": [left, right, *good, "--param", "refine_passes=((24,7,8))"],
         "iteration_cap": [left, right, *good, "--max-iterations", "0"],
         "missing_scene": ["--scene", str(folder / "no_scene")],
     }[case]

@@ -116,6 +116,12 @@ def _calibration(args, left):
     return calib
 
 
+def _tuple_text(values) -> str:
+    """A tuple parameter as ``--param`` reads it: ``"3,9,18"``, nested ``"24:7:8,4:4:2"``."""
+    return ",".join(":".join(str(k) for k in v) if isinstance(v, tuple) else str(v)
+                    for v in values)
+
+
 def param_changes(items, defaults) -> dict:
     """``{name: value}`` from ``--param NAME=VALUE`` items, each value read as the type of
     the field of ``defaults`` (a :class:`~lss_kernels.Params`); a one-line ``CliError``
@@ -144,8 +150,10 @@ def param_changes(items, defaults) -> dict:
             else:
                 changes[name] = float(value)
         except ValueError:
-            raise CliError(f"--param {name}: expected a {type(current).__name__}, "
-                           f"got {value!r}") from None
+            expected = type(current).__name__
+            if isinstance(current, tuple):
+                expected = "tuple, written " + _tuple_text(current)
+            raise CliError(f"--param {name}: expected a {expected}, got {value!r}") from None
     return changes
 
 
