@@ -396,14 +396,14 @@ class MedianFilter:
     in the bucket tree, the tree once for every image of up to :data:`SCRATCH`.
     """
 
-    def __init__(self, pool, height, width, size):
+    def __init__(self, pool, height, width, size, source=False):
         self.H, self.W = int(height), int(width)
         self.median_size = int(size)
         self.lanes = lanes.lanes_for_arch()
         self.extent = pool.extent(self.H, self.W)
-        #: a plane of the bucket tree for the users to write what they filter into
-        #: (:meth:`shared`)
-        self.source = pool.field(ti.f32, self.extent.bucket, bucket=True)
+        #: with ``source``, a plane of the bucket tree for the users of a shared filter to
+        #: write what they filter into (:meth:`shared`); else None
+        self.source = pool.field(ti.f32, self.extent.bucket, bucket=True) if source else None
         if self.median_size > 1:
             self.bucket = bucket_shape(self.H, self.W)
             shape = scratch_shape(self.bucket)
@@ -480,7 +480,7 @@ class MedianFilter:
         sink)``, so that the sort compiles once for all of them (a kernel instance is one
         per filter object and source plane).  Ask before the pool is finalised."""
         return pool.shared(("median filter", int(size), int(height), int(width)),
-                           lambda: cls(pool, height, width, size))
+                           lambda: cls(pool, height, width, size, source=True))
 
     def run(self, src, sink):
         """``sink.store(y, x, m)`` for every pixel, ``m`` the median of ``src`` (an ``(H, W)``

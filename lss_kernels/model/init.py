@@ -200,8 +200,9 @@ class InitialRegion:
         """d-bar from the first consensus, also into the shared median's source
         (:meth:`smooth`)."""
         for y, x in self.d:
-            self.d[y, x] = mean[y, x] if precision[y, x] > 0 else -1.0
-            self.median.source[y, x] = self.d[y, x]
+            d = mean[y, x] if precision[y, x] > 0 else -1.0
+            self.d[y, x] = d
+            self.median.source[y, x] = d
 
     def smooth(self):
         """d-bar <- its ``MEDIAN`` squared median (symmetric borders; no match counts as -1),
