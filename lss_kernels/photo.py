@@ -19,6 +19,9 @@ is one of many, so:
   found, up to ``MAX_WINDOWS`` windows; a point stays the pair's anchor in every window
   (the checks after a solve keep the object that holds it:
   :func:`~lss_kernels.checks.outline.on_layers`);
+* after each window's solve from a point, a neighbour just behind the object that the solve
+  took with it is split off (:func:`~lss_kernels.checks.split.split_neighbour`, recorded in
+  ``result.recovery["neighbour"]``);
 * the window's solve is :func:`lss_kernels.solve` with the given parameters; the third layer
   (``Params.front_margin``, :mod:`lss_kernels.model.front`: what stands in front of the
   object leaves both fits and the data term) is off unless they turn it on.
@@ -238,11 +241,15 @@ def solve_photo_cached(cache, left, right, d_max, init, params, callback=None):
     """:func:`solve_photo` with the solvers of ``cache`` (a
     :class:`~lss_kernels.solver_cache.SolverCache`, left open); returns ``(result, facts)``
     as :func:`solve_in_windows`."""
+    from .checks.split import split_neighbour
     from .checks.validate import check_inputs
     left, right, d_max, init = check_inputs(left, right, d_max, init, "left", params)
 
     def run(l, r, start, anchor):
-        return cache.solve_pair(l, r, d_max, start, "left", params, callback, anchor)
+        result, facts = cache.solve_pair(l, r, d_max, start, "left", params, callback, anchor)
+        if anchor is not None:
+            result.recovery["neighbour"] = split_neighbour(result, (anchor.x, anchor.y), l, r)
+        return result, facts
 
     def locate(l, r, start):
         return cache.locate(l, r, d_max, start, params)

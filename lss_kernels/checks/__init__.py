@@ -9,5 +9,6 @@
 - :mod:`.direction`: swapped views, a search range too short, a range for a pair given none;
 - :mod:`.teeth`: on a periodic pair, the foreground moved to the tooth the outline shows;
 - :mod:`.recovery`: a collapsed model recognised and solved again;
+- :mod:`.split`: after a whole photo's solve, a neighbour just behind the object split off;
 - :mod:`.around`: :func:`~lss_kernels.solve`, these checks around a solver.
 """
