@@ -10,32 +10,39 @@ spreads over it, and Theta_1 bends to hold both.  The refinement
 layer, so the step between them becomes a ramp and the strip that the object hides from the
 right camera on the neighbour, the object's own occlusion there, is lost.
 
-After a whole photo's solve, the object's pixels are explained by two quadratics
-(:func:`two_surfaces`): the object's, grown from the pixels around the click, and a
-second one over the pixels that lie more than ``STEP`` behind it; for ``ROUNDS`` rounds each
-is fitted to its side clear of the ramp (``GAP`` pixels from the other side) and each pixel
-goes to the nearer fit (by the majority of the object's pixels in its ``MAJORITY`` square).
-The second surface is a neighbour (:func:`split_neighbour`) when
+After a whole photo's solve, the object's pixels are split between two quadratics
+(:func:`two_surfaces`) of d-bar, the consensus mean read at each pixel's cyclopean column
+(:func:`consensus_in_left_view`): the refined disparity follows the bent Theta_1 wherever
+the object's own matches are not distinct, and shows no step there.  The first quadratic is
+grown from the pixels around the click, the second from the pixels that lie more than
+``STEP`` behind it; for ``ROUNDS`` rounds each is fitted to its side clear of the ramp
+(``GAP`` pixels from the other side) and each pixel goes to the nearer fit (by the majority
+of the object's pixels in its ``MAJORITY`` square).  The second surface is a neighbour (:func:`split_neighbour`) when
 
 * it covers at least ``MIN_SHARE`` of the object's pixels (and ``MIN_PIXELS``), in one
   4-connected piece that does not hold the click, and meets it along ``MIN_BORDER`` pixels;
 * its pixels lie on it (median distance at most ``FIT`` times their median distance to the
-  object's surface, which is at least ``STEP``);
+  object's surface, which is at least ``STEP``), and the output (the refined matches) lies
+  within ``STEP`` of each side's surface (median over the side: on a periodic object d-bar
+  can take a wrong tooth over part of it);
 * it lies behind the object where they meet: on ``BORDER_SHARE`` of the pixels of their
   common border the object's surface is ``STEP`` or more in front of the neighbour's (a
   surface that folds smoothly away meets its fit with no gap).
 
-The neighbour then leaves the object (layer 0, behind it), each side of their border takes
-its own surface where the refinement's ramp strays more than ``RAMP`` from it (within
-``RAMP_REACH`` pixels of the border), and the neighbour's pixels that the object hides from
-the right camera are occluded (:func:`~lss_kernels.model.layers.occlusion_by_layers`).
+The neighbour then leaves the object (layer 0, behind it).  d-bar and the refined matches
+both spread over the strip that the object hides, so each row's edge is moved to the column
+that explains the pair best (:func:`snap_edges`); each side of the border takes its own
+surface where the output strays more than ``RAMP`` from it (within ``RAMP_REACH`` pixels of
+the border), and the neighbour's pixels that the object hides from the right camera are
+occluded (:func:`~lss_kernels.model.layers.occlusion_by_layers`).
 """
 import numpy as np
 
 from ..model.quadratic import basis
 
 __all__ = ["BORDER_SHARE", "FIT", "MIN_BORDER", "MIN_PIXELS", "MIN_SHARE", "RAMP", "RAMP_REACH",
-           "ROUNDS", "SNAP", "STEP", "snap_edges", "split_neighbour", "two_surfaces"]
+           "ROUNDS", "SNAP", "STEP", "consensus_in_left_view", "snap_edges", "split_neighbour",
+           "two_surfaces"]
 
 #: The smallest jump between the object and a neighbour, left-view pixels.
 STEP = 1.5
@@ -178,7 +185,7 @@ def _within(mask, reach):
 
 def two_surfaces(disparity, foreground, point):
     """The object's pixels ``foreground`` split between two quadratics of ``disparity``
-    (left view, ``(H, W)``), the first grown from the pixels around ``point`` (``(x, y)``,
+    (left view, ``(H, W)``: d-bar in :func:`split_neighbour`), the first grown from the pixels around ``point`` (``(x, y)``,
     integer pixel of the object).  Returns ``(object, other, object_surface,
     other_surface)`` (masks and maps ``(H, W)``), or None when no second surface lies
     ``STEP`` behind the first."""
@@ -226,8 +233,9 @@ def snap_edges(first, other, obj, back, left, right):
     right = np.asarray(right, np.float64)
     if left.ndim == 2:
         left, right = left[..., None], right[..., None]
-    fore = pixel_costs(left, upsampled(right), obj)
-    behind = pixel_costs(left, upsampled(right), back)
+    right = upsampled(right)
+    fore = pixel_costs(left, right, obj)
+    behind = pixel_costs(left, right, back)
     H, W = first.shape
     ys, xs = np.nonzero(first[:, 1:] & other[:, :-1])
     xs = xs + 1
@@ -261,6 +269,17 @@ def snap_edges(first, other, obj, back, left, right):
     return int((smooth != 0).sum())
 
 
+def consensus_in_left_view(consensus, disparity):
+    """The consensus mean (cyclopean frame, ``(H, W)``) read at each left-view pixel's
+    cyclopean column ``x - disparity / 2`` (nearest, clamped to the image): d-bar in the left
+    view."""
+    consensus = np.asarray(consensus, np.float64)
+    H, W = consensus.shape
+    columns = np.rint(np.arange(W)[None, :] - np.asarray(disparity, np.float64) / 2.0)
+    columns = np.clip(np.nan_to_num(columns), 0, W - 1).astype(np.int64)
+    return np.take_along_axis(consensus, columns, axis=1)
+
+
 def split_neighbour(result, point, left=None, right=None):
     """``result`` (a window's :class:`~lss_kernels.result.Result`, left view) with a
     neighbour behind the object moved out of it (module text); ``point``: the click,
@@ -276,15 +295,16 @@ def split_neighbour(result, point, left=None, right=None):
     if not (0 <= x < W and 0 <= y < H) or not F[y, x] or F.sum() < MIN_PIXELS:
         facts["why"] = "the click is not on the object"
         return facts
-    found = two_surfaces(result.disparity, F, (x, y))
+    D = np.asarray(result.disparity, np.float64)
+    evidence = consensus_in_left_view(result.consensus_mean, D)
+    found = two_surfaces(evidence, F, (x, y))
     if found is None:
         facts["why"] = "no second surface behind the object"
         return facts
     first, other, obj, back = found
-    D = np.asarray(result.disparity, np.float64)
     n_other = int(other.sum())
-    near = np.median(np.abs(D - back)[other])
-    far = np.median(np.abs(D - obj)[other])
+    near = np.median(np.abs(evidence - back)[other])
+    far = np.median(np.abs(evidence - obj)[other])
     border = _border(first, other) | _border(other, first)
     gap = (obj - back)[border]
     in_front = float((gap >= STEP).mean()) if gap.size else 0.0
@@ -296,6 +316,9 @@ def split_neighbour(result, point, left=None, right=None):
         return facts
     if far < STEP or near > FIT * far:
         facts["why"] = "the second surface does not explain its pixels"
+        return facts
+    if max(np.median(np.abs(D - obj)[first]), np.median(np.abs(D - back)[other])) > STEP:
+        facts["why"] = "the output does not follow the two surfaces"
         return facts
     if border.sum() < MIN_BORDER:
         facts["why"] = "the second surface hardly touches the object"
