@@ -186,6 +186,13 @@ def test_a_click_off_the_object_changes_nothing(click):
     assert facts == {"split": False, "why": "the click is not on the object"}
 
 
+def test_an_object_of_a_few_pixels_is_left_alone():
+    fg = np.zeros((H, W), bool)
+    fg[38:43, 78:83] = True
+    facts = split.split_neighbour(_result(np.where(fg, 36.0, 10.0), fg), CLICK)
+    assert facts == {"split": False, "why": "the object is too small"}
+
+
 def test_the_components_are_the_4_connected_pieces():
     mask = np.array([[1, 1, 0, 1],
                      [0, 1, 0, 1],

@@ -219,8 +219,8 @@ def two_surfaces(disparity, foreground, point):
 
 def snap_edges(first, other, obj, back, left, right):
     """The object's left edges against the neighbour, each row's moved to the column that
-    explains the row best (in place): the refinement's ramp puts the edge where the object's
-    matches spread over the strip it hides, not where the object ends.  Within ``SNAP`` plus
+    explains the row best (in place): d-bar and the refined matches both spread the object
+    over the strip it hides, so the fits meet there, not where the object ends.  Within ``SNAP`` plus
     the jump ``J`` of a row's edge ``c``, the column minimising the neighbour's
     :func:`~lss_kernels.checks.outline.pixel_costs` left of ``c - J``, ``HIDDEN_COST`` over
     ``[c - J, c)`` (hidden from the right camera) and the object's costs from ``c`` on (the
@@ -292,8 +292,11 @@ def split_neighbour(result, point, left=None, right=None):
     H, W = F.shape
     x, y = int(round(point[0])), int(round(point[1]))
     facts = {"split": False}
-    if not (0 <= x < W and 0 <= y < H) or not F[y, x] or F.sum() < MIN_PIXELS:
+    if not (0 <= x < W and 0 <= y < H) or not F[y, x]:
         facts["why"] = "the click is not on the object"
+        return facts
+    if F.sum() < MIN_PIXELS:
+        facts["why"] = "the object is too small"
         return facts
     D = np.asarray(result.disparity, np.float64)
     evidence = consensus_in_left_view(result.consensus_mean, D)
