@@ -17,7 +17,8 @@ the object's own matches are not distinct, and shows no step there.  The first q
 grown from the pixels around the click, the second from the pixels that lie more than
 ``STEP`` behind it; for ``ROUNDS`` rounds each is fitted to its side clear of the ramp
 (``GAP`` pixels from the other side) and each pixel goes to the nearer fit (by the majority
-of the object's pixels in its ``MAJORITY`` square).  The second surface is a neighbour (:func:`split_neighbour`) when
+of the object's pixels in its ``MAJORITY`` square).  The second surface is a neighbour
+(:func:`split_neighbour`) when
 
 * it covers at least ``MIN_SHARE`` of the object's pixels (and ``MIN_PIXELS``), in one
   4-connected piece that does not hold the click, and meets it along ``MIN_BORDER`` pixels;
@@ -38,7 +39,9 @@ occluded (:func:`~lss_kernels.model.layers.occlusion_by_layers`).
 """
 import numpy as np
 
+from ..model.init import background_fit
 from ..model.quadratic import basis
+from .teeth import _eroded
 
 __all__ = ["BORDER_SHARE", "FIT", "MIN_BORDER", "MIN_PIXELS", "MIN_SHARE", "RAMP", "RAMP_REACH",
            "ROUNDS", "SNAP", "STEP", "consensus_in_left_view", "snap_edges", "split_neighbour",
@@ -73,29 +76,16 @@ SNAP = 2
 MAJORITY = 7
 
 
-def _fit(D, mask, shape, rounds=4):
-    """A robust quadratic of ``D`` over ``mask`` (least squares, then ``rounds`` times over
-    the values within 2.5 robust deviations, at least 1 px, of the last fit), evaluated at
-    every pixel of ``shape``; None with fewer than 6 values."""
-    H, W = shape
-    ys, xs = np.nonzero(mask)
-    if xs.size < 6:
-        return None
-    s = max(H, W) / 2.0
-    U = basis((xs - W / 2.0) / s, (ys - H / 2.0) / s)
-    d = D[ys, xs].astype(np.float64)
-    keep = np.ones(d.size, bool)
-    theta = None
-    for _ in range(rounds + 1):
-        if keep.sum() < 6:
-            break
-        theta = np.linalg.lstsq(U[keep], d[keep], rcond=None)[0]
-        r = np.abs(d - U @ theta)
-        keep = r <= max(1.0, 2.5 * 1.4826 * float(np.median(r[keep])))
-    if theta is None:
+def _fit(D, mask):
+    """The robust quadratic of ``D`` over ``mask`` (:func:`~lss_kernels.model.init.
+    background_fit`: least squares, then again over the values within 1 px, or 2.5 robust
+    deviations, of the last fit), evaluated at every pixel; None with fewer than 6 values."""
+    H, W = D.shape
+    coefficients, _ = background_fit(np.where(mask, D, -1.0), band=1.0)
+    if coefficients is None:
         return None
     yy, xx = np.mgrid[0:H, 0:W]
-    return basis((xx - W / 2.0) / s, (yy - H / 2.0) / s) @ theta
+    return basis(xx / W - 0.5, yy / H - 0.5) @ coefficients
 
 
 def _majority(mask, within, size=MAJORITY):
@@ -162,33 +152,20 @@ def _piece(mask, seed):
 
 def _border(a, b):
     """Pixels of ``a`` with a 4-neighbour in ``b``."""
-    n = np.zeros_like(b)
-    n[1:, :] |= b[:-1, :]
-    n[:-1, :] |= b[1:, :]
-    n[:, 1:] |= b[:, :-1]
-    n[:, :-1] |= b[:, 1:]
-    return a & n
+    return a & _within(b, 1)
 
 
 def _within(mask, reach):
-    """Pixels within ``reach`` (chessboard distance) of ``mask``."""
-    out = mask.copy()
-    for _ in range(reach):
-        grown = out.copy()
-        grown[1:, :] |= out[:-1, :]
-        grown[:-1, :] |= out[1:, :]
-        grown[:, 1:] |= out[:, :-1]
-        grown[:, :-1] |= out[:, 1:]
-        out = grown
-    return out
+    """Pixels within ``reach`` 4-neighbour steps of ``mask``."""
+    return ~_eroded(~mask, reach)
 
 
 def two_surfaces(disparity, foreground, point):
     """The object's pixels ``foreground`` split between two quadratics of ``disparity``
-    (left view, ``(H, W)``: d-bar in :func:`split_neighbour`), the first grown from the pixels around ``point`` (``(x, y)``,
-    integer pixel of the object).  Returns ``(object, other, object_surface,
-    other_surface)`` (masks and maps ``(H, W)``), or None when no second surface lies
-    ``STEP`` behind the first."""
+    (left view, ``(H, W)``: d-bar in :func:`split_neighbour`), the first grown from the
+    pixels around ``point`` (``(x, y)``, integer pixel of the object).  Returns ``(object,
+    other, object_surface, other_surface)`` (masks and maps ``(H, W)``), or None when no
+    second surface lies ``STEP`` behind the first."""
     D = np.asarray(disparity, np.float64)
     F = np.asarray(foreground, bool)
     H, W = F.shape
@@ -198,15 +175,15 @@ def two_surfaces(disparity, foreground, point):
     yy, xx = np.mgrid[0:H, 0:W]
     radius = CORE * np.sqrt(F.sum() / np.pi)
     core = F & (np.hypot(xx - x0, yy - y0) <= radius)
-    obj = _fit(D, core, F.shape)
+    obj = _fit(D, core)
     if obj is None:
         return None
     other = _largest(_majority(D < obj - STEP, F), exclude=seed)
     for _ in range(ROUNDS):
         # each surface from its own side, clear of the ramp between them
         rest = F & ~other
-        back = _fit(D, other & ~_within(rest, GAP), F.shape)
-        obj = _fit(D, rest & ~_within(other, GAP), F.shape)
+        back = _fit(D, other & ~_within(rest, GAP))
+        obj = _fit(D, rest & ~_within(other, GAP))
         if back is None or obj is None:
             return None
         nearer = _majority(np.abs(D - back) < np.abs(D - obj), F)
@@ -220,8 +197,8 @@ def two_surfaces(disparity, foreground, point):
 def snap_edges(first, other, obj, back, left, right):
     """The object's left edges against the neighbour, each row's moved to the column that
     explains the row best (in place): d-bar and the refined matches both spread the object
-    over the strip it hides, so the fits meet there, not where the object ends.  Within ``SNAP`` plus
-    the jump ``J`` of a row's edge ``c``, the column minimising the neighbour's
+    over the strip it hides, so the fits meet there, not where the object ends.  Within
+    ``SNAP`` plus the jump ``J`` of a row's edge ``c``, the column minimising the neighbour's
     :func:`~lss_kernels.checks.outline.pixel_costs` left of ``c - J``, ``HIDDEN_COST`` over
     ``[c - J, c)`` (hidden from the right camera) and the object's costs from ``c`` on (the
     scanline of Eq. 1, as :func:`~lss_kernels.checks.outline.row_outline`), then the moves
